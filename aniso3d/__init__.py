@@ -1,0 +1,31 @@
+"""aniso3d: render finely structured 3D objects fast and without aliasing, by
+turning polygon meshes into an anisotropic 3D texture drawn as oriented point
+splats (Ito, Fujimoto, Muraoka, Chiba).
+
+The data flow, one module per stage: :mod:`aniso3d.mesh` (load) ->
+:mod:`aniso3d.clip` (exact clipping into voxels) -> :mod:`aniso3d.texture`
+(density and shading spheres) -> :mod:`aniso3d.points` (oriented points) ->
+the renderers.
+"""
+
+from . import scenes
+from .errors import Aniso3DError, FormatError, InputError, ResourceError
+from .mesh import Mesh, load_mesh
+from .points import PointCloud
+from .texture import AnisoTexture, build_texture, sphere_directions
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Aniso3DError",
+    "AnisoTexture",
+    "FormatError",
+    "InputError",
+    "Mesh",
+    "PointCloud",
+    "ResourceError",
+    "build_texture",
+    "load_mesh",
+    "scenes",
+    "sphere_directions",
+]

@@ -1,0 +1,327 @@
+"""Stage 1: triangle meshes with per-face Phong material, loaded from files.
+
+A :class:`Mesh` is the plain data object every later stage starts from. Loading
+goes through trimesh; scenes are flattened into one mesh with their transforms
+applied, and whatever colour information a file has (face colours, vertex
+colours, material colours, a texture sampled at each face's centroid) becomes
+the per-face diffuse reflectance ``kd``.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+
+#: Diffuse reflectance of faces whose file carries no colour (a light grey).
+DEFAULT_KD = (0.7, 0.7, 0.7)
+#: Specular coefficient where the material does not give one.
+DEFAULT_KS = 0.1
+#: Phong exponent where the material does not give one.
+DEFAULT_SHININESS = 16.0
+#: Largest Phong exponent accepted; higher ones are clamped (a mirror-like lobe
+#: narrower than this is below a pixel at any size we render).
+MAX_SHININESS = 1.0e4
+
+
+@dataclass(frozen=True, eq=False)
+class Mesh:
+    """A triangle mesh with one Phong material per face.
+
+    Attributes:
+        vertices: (V, 3) float64, world units.
+        faces: (F, 3) int64 indices into ``vertices``.
+        kd: (F, 3) float32 diffuse reflectance in [0, 1] (display RGB values).
+        ks: (F,) float32 specular coefficient in [0, 1].
+        shininess: (F,) float32 Phong exponent n >= 0.
+        name: label used in reports.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    kd: np.ndarray
+    ks: np.ndarray
+    shininess: np.ndarray
+    name: str = "mesh"
+
+    def __post_init__(self) -> None:
+        v = np.ascontiguousarray(self.vertices, dtype=np.float64)
+        f = np.asarray(self.faces)
+        if v.ndim != 2 or v.shape[1] != 3:
+            raise InputError(f"mesh vertices must have shape (V, 3), got {v.shape}")
+        if f.ndim != 2 or f.shape[1] != 3:
+            raise InputError(
+                f"mesh faces must have shape (F, 3) (triangles), got {f.shape}; "
+                "triangulate polygons first"
+            )
+        if f.size and not np.issubdtype(f.dtype, np.integer):
+            raise InputError(f"mesh faces must be integer indices, got dtype {f.dtype}")
+        f = np.ascontiguousarray(f, dtype=np.int64)
+        if len(f) == 0:
+            raise InputError(
+                f"mesh '{self.name}' has no faces: nothing to render. "
+                "Check that the file holds triangles or polygons, not only points or lines"
+            )
+        if not np.all(np.isfinite(v)):
+            bad = int(np.count_nonzero(~np.isfinite(v).all(axis=1)))
+            raise InputError(
+                f"mesh '{self.name}' has {bad} vertices with NaN or Inf coordinates; "
+                "repair or remove them before building"
+            )
+        if f.min() < 0 or f.max() >= len(v):
+            raise InputError(
+                f"mesh '{self.name}' has faces indexing vertices outside 0..{len(v) - 1} "
+                f"(found {int(f.min())}..{int(f.max())}); the file is damaged"
+            )
+        n = len(f)
+        kd = _per_face(self.kd, n, 3, "kd")
+        ks = _per_face(self.ks, n, None, "ks")
+        sh = _per_face(self.shininess, n, None, "shininess")
+        if not (np.isfinite(kd).all() and np.isfinite(ks).all() and np.isfinite(sh).all()):
+            raise InputError(f"mesh '{self.name}' has NaN or Inf material values")
+        object.__setattr__(self, "vertices", v)
+        object.__setattr__(self, "faces", f)
+        object.__setattr__(self, "kd", np.clip(kd, 0.0, 1.0).astype(np.float32))
+        object.__setattr__(self, "ks", np.clip(ks, 0.0, 1.0).astype(np.float32))
+        object.__setattr__(self, "shininess", np.clip(sh, 0.0, MAX_SHININESS).astype(np.float32))
+
+    @property
+    def n_faces(self) -> int:
+        return len(self.faces)
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """(2, 3) float64: min and max corner of the vertices the faces use."""
+        used = self.vertices[np.unique(self.faces)]
+        return np.stack([used.min(axis=0), used.max(axis=0)])
+
+    @property
+    def triangles(self) -> np.ndarray:
+        """(F, 3, 3) float64 corner positions."""
+        return self.vertices[self.faces]
+
+    def face_areas(self) -> np.ndarray:
+        """(F,) float64 triangle areas in world units squared."""
+        t = self.triangles
+        return 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+
+    def area(self) -> float:
+        return float(self.face_areas().sum())
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the mesh as a renderer would hold it: float32 positions,
+        uint32 indices and a float32 RGB + ks + n material per face."""
+        return int(len(self.vertices) * 12 + len(self.faces) * 12 + len(self.faces) * 20)
+
+    @classmethod
+    def from_arrays(
+        cls,
+        vertices,
+        faces,
+        kd=DEFAULT_KD,
+        ks=DEFAULT_KS,
+        shininess=DEFAULT_SHININESS,
+        name: str = "mesh",
+    ) -> Mesh:
+        """Build a mesh from arrays; material values may be per face or one for all."""
+        return cls(np.asarray(vertices), np.asarray(faces), kd, ks, shininess, name)
+
+    def transformed(self, matrix: np.ndarray) -> Mesh:
+        """A copy with vertices multiplied by a 4x4 affine matrix."""
+        m = np.asarray(matrix, dtype=np.float64)
+        v = self.vertices @ m[:3, :3].T + m[:3, 3]
+        return Mesh(v, self.faces, self.kd, self.ks, self.shininess, self.name)
+
+    def to_trimesh(self):
+        import trimesh
+
+        colors = np.concatenate(
+            [np.round(self.kd * 255).astype(np.uint8), np.full((self.n_faces, 1), 255, np.uint8)],
+            axis=1,
+        )
+        return trimesh.Trimesh(self.vertices, self.faces, face_colors=colors, process=False)
+
+
+def _per_face(value, n: int, width: int | None, what: str) -> np.ndarray:
+    a = np.asarray(value, dtype=np.float64)
+    shape = (n,) if width is None else (n, width)
+    try:
+        return np.broadcast_to(a, shape).copy()
+    except ValueError:
+        raise InputError(
+            f"material '{what}' must be one value or one per face {shape}, got shape {a.shape}"
+        ) from None
+
+
+def concatenate(meshes: list[Mesh], name: str = "mesh") -> Mesh:
+    """Join meshes into one, keeping each face's material."""
+    if not meshes:
+        raise InputError("nothing to concatenate: the list of meshes is empty")
+    offsets = np.cumsum([0] + [len(m.vertices) for m in meshes[:-1]])
+    return Mesh(
+        np.concatenate([m.vertices for m in meshes]),
+        np.concatenate([m.faces + o for m, o in zip(meshes, offsets, strict=True)]),
+        np.concatenate([m.kd for m in meshes]),
+        np.concatenate([m.ks for m in meshes]),
+        np.concatenate([m.shininess for m in meshes]),
+        name,
+    )
+
+
+# --------------------------------------------------------------------------- loading
+
+MESH_SUFFIXES = {".obj", ".ply", ".stl", ".glb", ".gltf", ".off", ".dae", ".3mf"}
+
+
+def check_readable_file(path: str | os.PathLike, what: str = "input") -> Path:
+    """Return ``path`` as a Path if it is a readable, non-empty regular file."""
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"{what} file '{p}' does not exist; check the path")
+    if p.is_dir():
+        raise InputError(f"{what} '{p}' is a directory; name a file inside it")
+    if not os.access(p, os.R_OK):
+        raise InputError(f"{what} file '{p}' is not readable; check its permissions")
+    if p.stat().st_size == 0:
+        raise InputError(f"{what} file '{p}' is empty")
+    return p
+
+
+def load_mesh(path: str | os.PathLike, name: str | None = None) -> Mesh:
+    """Read a mesh file (OBJ+MTL, PLY, STL, GLB/GLTF, OFF, ...) with its materials.
+
+    Scenes are flattened into one mesh with their node transforms applied.
+    Per-face ``kd`` comes from, in order: face colours, vertex colours (averaged
+    per face), a texture image sampled at each face's UV centroid, the material's
+    main colour, else :data:`DEFAULT_KD`. ``ks`` and the Phong exponent come
+    from the material where it has them (OBJ ``Ks``/``Ns``; glTF roughness
+    mapped to an exponent), else :data:`DEFAULT_KS` / :data:`DEFAULT_SHININESS`.
+    """
+    import trimesh
+
+    p = check_readable_file(path, "mesh")
+    suffix = p.suffix.lower()
+    if suffix not in MESH_SUFFIXES:
+        raise InputError(
+            f"'{p.name}' has suffix '{suffix or '(none)'}', which aniso3d does not read as a "
+            f"mesh; supported: {', '.join(sorted(MESH_SUFFIXES))}"
+        )
+    try:
+        scene = trimesh.load(str(p), force="scene", process=False)
+    except Exception as exc:  # trimesh raises many types for damaged files
+        raise InputError(
+            f"could not read mesh '{p}': {type(exc).__name__}: {exc}. "
+            "The file may be truncated or not in the format its suffix says"
+        ) from None
+    parts: list[Mesh] = []
+    try:
+        dumped = scene.dump(concatenate=False) if hasattr(scene, "dump") else [scene]
+    except Exception as exc:
+        raise InputError(f"could not flatten the scene in '{p}': {exc}") from None
+    for geom in dumped:
+        if not isinstance(geom, trimesh.Trimesh) or len(geom.faces) == 0:
+            continue
+        parts.append(_from_trimesh(geom))
+    if not parts:
+        raise InputError(
+            f"mesh file '{p}' holds no triangles (only points, lines or nothing); "
+            "aniso3d needs a surface mesh"
+        )
+    return concatenate(parts, name=name or p.stem)
+
+
+def _from_trimesh(tm) -> Mesh:
+    n = len(tm.faces)
+    kd = np.tile(np.asarray(DEFAULT_KD, dtype=np.float64), (n, 1))
+    ks = np.full(n, DEFAULT_KS)
+    sh = np.full(n, DEFAULT_SHININESS)
+    visual = tm.visual
+    kind = getattr(visual, "kind", None)
+    if kind == "face":
+        kd = np.asarray(visual.face_colors, dtype=np.float64)[:, :3] / 255.0
+    elif kind == "vertex":
+        vc = np.asarray(visual.vertex_colors, dtype=np.float64)[:, :3] / 255.0
+        kd = vc[tm.faces].mean(axis=1)
+    elif kind == "texture" or hasattr(visual, "material"):
+        mat = getattr(visual, "material", None)
+        if mat is not None:
+            kd_t, ks_m, sh_m = _material_values(mat)
+            if kd_t is not None:
+                kd[:] = kd_t
+            if ks_m is not None:
+                ks[:] = ks_m
+            if sh_m is not None:
+                sh[:] = sh_m
+            image = _material_image(mat)
+            uv = getattr(visual, "uv", None)
+            if image is not None and uv is not None and len(uv) == len(tm.vertices):
+                kd = _sample_texture(image, np.asarray(uv, dtype=np.float64)[tm.faces].mean(axis=1))
+                if kd_t is not None and _is_pbr(mat):
+                    kd = kd * kd_t  # glTF multiplies the base colour texture by its factor
+    return Mesh(np.asarray(tm.vertices), np.asarray(tm.faces), kd, ks, sh)
+
+
+def _is_pbr(mat) -> bool:
+    return hasattr(mat, "baseColorFactor")
+
+
+def _material_values(mat):
+    """(kd RGB or None, ks or None, shininess or None) from a trimesh material."""
+    kd = ks = sh = None
+    if _is_pbr(mat):
+        f = getattr(mat, "baseColorFactor", None)
+        if f is not None:
+            f = np.asarray(f, dtype=np.float64).ravel()
+            kd = f[:3] / (255.0 if f.max() > 1.0 else 1.0)
+        rough = getattr(mat, "roughnessFactor", None)
+        metal = getattr(mat, "metallicFactor", None)
+        if rough is not None:
+            r = float(np.clip(rough, 0.02, 1.0))
+            sh = 2.0 / (r**4) - 2.0  # Blinn-Phong exponent equivalent to GGX roughness
+            ks = 0.04 + 0.5 * (1.0 - r)
+        if metal is not None and ks is not None:
+            ks = min(1.0, ks + 0.5 * float(metal))
+        return kd, ks, sh
+    for attr in ("diffuse", "main_color"):
+        c = getattr(mat, attr, None)
+        if c is not None:
+            c = np.asarray(c, dtype=np.float64).ravel()
+            if c.size >= 3:
+                kd = c[:3] / (255.0 if c.max() > 1.0 else 1.0)
+                break
+    spec = getattr(mat, "specular", None)
+    if spec is not None:
+        s = np.asarray(spec, dtype=np.float64).ravel()
+        if s.size:
+            ks = float(s[:3].mean() / (255.0 if s.max() > 1.0 else 1.0))
+    gloss = getattr(mat, "glossiness", None)
+    if gloss is not None and np.isfinite(gloss):
+        sh = float(gloss)
+    return kd, ks, sh
+
+
+def _material_image(mat):
+    for attr in ("image", "baseColorTexture"):
+        img = getattr(mat, attr, None)
+        if img is not None:
+            return img
+    return None
+
+
+def _sample_texture(image, uv: np.ndarray) -> np.ndarray:
+    """Nearest texel of a PIL image at (F, 2) UVs (wrapped), as (F, 3) in [0, 1]."""
+    try:
+        arr = np.asarray(image.convert("RGB"), dtype=np.float64) / 255.0
+    except Exception as exc:
+        raise InputError(f"the mesh's texture image cannot be decoded: {exc}") from None
+    h, w = arr.shape[:2]
+    u = np.mod(np.nan_to_num(uv[:, 0]), 1.0)
+    v = np.mod(np.nan_to_num(uv[:, 1]), 1.0)
+    x = np.clip((u * w).astype(np.int64), 0, w - 1)
+    y = np.clip(((1.0 - v) * h).astype(np.int64), 0, h - 1)
+    return arr[y, x]

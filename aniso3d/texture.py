@@ -1,0 +1,533 @@
+"""Stage 3: registration of sub-polygons onto density and shading spheres.
+
+This is paper section 2.2. Every sub-polygon of a voxel adds
+``S * |N . N_p|`` to each sample p of the voxel's density sphere, and its
+area ``S`` with area-weighted material to the single shading-sphere sample
+nearest its normal. Then the polygons are gone; an :class:`AnisoTexture`
+holds only the spheres.
+
+Storage is sparse twice over: only occupied voxels exist (``coords``), and a
+voxel's shading sphere keeps only its non-empty samples, as *entries* in CSR
+layout (``entry_offsets``; the entries of voxel i are
+``entry_offsets[i]:entry_offsets[i+1]``).
+
+Besides what the paper keeps, each entry stores the area-weighted centroid of
+its facets and their area-weighted mean normal (a vector whose length, 1 for
+a flat patch and less for scattered facets, says how coherent they are). Both
+are linear sums, so a coarser texture can still be aggregated exactly from a
+finer one; the point stage uses them to put points on the true surface.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import os
+import time
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .clip import Grid, clip_to_grid, make_grid, triangle_normals
+from .errors import FormatError, InputError
+from .mesh import Mesh, check_readable_file
+from .points import PointCloud
+from .util import atomic_write
+
+FORMAT_NAME = "aniso3d-texture"
+FORMAT_VERSION = 1
+DIRECTION_SETS = ("fibonacci", "random")
+PLACEMENTS = ("centroid", "center", "sphere")
+POINT_NORMALS = ("mean", "sample")
+
+
+# --------------------------------------------------------------------- directions
+
+
+def sphere_directions(k: int, kind: str = "fibonacci", seed: int = 0) -> np.ndarray:
+    """K unit vectors (K, 3) float64 on the sphere.
+
+    ``fibonacci`` is a deterministic low-discrepancy spiral; ``random`` is the
+    paper's choice, uniform on the sphere from a seeded generator.
+    """
+    if isinstance(k, bool) or int(k) != k or k < 1:
+        raise InputError(f"the number of sphere directions must be a whole number >= 1, got {k!r}")
+    k = int(k)
+    if k > 65536:
+        raise InputError(f"{k} sphere directions is above the supported maximum of 65536")
+    if kind == "fibonacci":
+        i = np.arange(k, dtype=np.float64)
+        z = 1.0 - (2.0 * i + 1.0) / k
+        r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+        phi = i * np.pi * (3.0 - np.sqrt(5.0))
+        d = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+    elif kind == "random":
+        g = np.random.default_rng(seed)
+        d = g.normal(size=(k, 3))
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+    else:
+        raise InputError(f"unknown direction set '{kind}'; choose one of {', '.join(DIRECTION_SETS)}")
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+# ------------------------------------------------------------------------ texture
+
+
+@dataclass(frozen=True, eq=False)
+class AnisoTexture:
+    """A sparse anisotropic 3D texture (density and shading spheres per voxel).
+
+    Attributes:
+        origin: (3,) float64 world position of the grid's minimum corner.
+        voxel_size: voxel edge h, world units.
+        shape: (3,) int64 grid cells along x, y, z.
+        coords: (M, 3) int32 integer cell of each occupied voxel, sorted.
+        directions: (K, 3) float64 unit sample directions N_p shared by both spheres.
+        density: (M, K) float64 density sphere ``D_v(p) = sum S |N . N_p|``,
+            units of h^2 (facet area projected along N_p).
+        entry_offsets: (M + 1,) int64 CSR offsets of each voxel's shading entries.
+        entry_direction: (E,) int32 sample index p of each shading entry.
+        entry_area: (E,) float64 facet area registered at the entry, units of h^2.
+        entry_kd: (E, 3) float32 area-weighted diffuse reflectance.
+        entry_ks: (E,) float32 area-weighted specular coefficient.
+        entry_shininess: (E,) float32 area-weighted Phong exponent.
+        entry_centroid: (E, 3) float64 area-weighted facet centroid, world units.
+        entry_normal: (E, 3) float32 area-weighted mean facet normal (length <= 1).
+        meta: provenance (direction set, seed, source, triangle count, mesh area).
+    """
+
+    origin: np.ndarray
+    voxel_size: float
+    shape: np.ndarray
+    coords: np.ndarray
+    directions: np.ndarray
+    density: np.ndarray
+    entry_offsets: np.ndarray
+    entry_direction: np.ndarray
+    entry_area: np.ndarray
+    entry_kd: np.ndarray
+    entry_ks: np.ndarray
+    entry_shininess: np.ndarray
+    entry_centroid: np.ndarray
+    entry_normal: np.ndarray
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        m, k = len(self.coords), len(self.directions)
+        e = len(self.entry_direction)
+        checks = {
+            "origin": (np.shape(self.origin), (3,)),
+            "shape": (np.shape(self.shape), (3,)),
+            "coords": (np.shape(self.coords), (m, 3)),
+            "directions": (np.shape(self.directions), (k, 3)),
+            "density": (np.shape(self.density), (m, k)),
+            "entry_offsets": (np.shape(self.entry_offsets), (m + 1,)),
+            "entry_area": (np.shape(self.entry_area), (e,)),
+            "entry_kd": (np.shape(self.entry_kd), (e, 3)),
+            "entry_ks": (np.shape(self.entry_ks), (e,)),
+            "entry_shininess": (np.shape(self.entry_shininess), (e,)),
+            "entry_centroid": (np.shape(self.entry_centroid), (e, 3)),
+            "entry_normal": (np.shape(self.entry_normal), (e, 3)),
+        }
+        for name, (got, want) in checks.items():
+            if tuple(got) != want:
+                raise FormatError(f"texture field '{name}' has shape {got}, expected {want}")
+        if not (np.isfinite(self.voxel_size) and self.voxel_size > 0):
+            raise FormatError(f"texture voxel_size must be positive, got {self.voxel_size}")
+        off = np.asarray(self.entry_offsets)
+        if m and (off[0] != 0 or off[-1] != e or np.any(np.diff(off) < 0)):
+            raise FormatError("texture entry_offsets are not a valid CSR offset array")
+
+    # ---------------------------------------------------------------- basics
+
+    @property
+    def n_voxels(self) -> int:
+        return len(self.coords)
+
+    @property
+    def n_entries(self) -> int:
+        return len(self.entry_direction)
+
+    @property
+    def n_directions(self) -> int:
+        return len(self.directions)
+
+    @property
+    def resolution(self) -> int:
+        return int(np.max(self.shape))
+
+    @property
+    def grid(self) -> Grid:
+        return Grid(np.asarray(self.origin, np.float64), float(self.voxel_size), np.asarray(self.shape))
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """(2, 3) world bounds of the grid."""
+        o = np.asarray(self.origin, np.float64)
+        return np.stack([o, o + np.asarray(self.shape) * self.voxel_size])
+
+    @property
+    def entry_voxel(self) -> np.ndarray:
+        """(E,) index into ``coords`` of each shading entry."""
+        return np.repeat(np.arange(self.n_voxels), np.diff(self.entry_offsets))
+
+    def voxel_centers(self) -> np.ndarray:
+        return self.grid.cell_centers(self.coords)
+
+    @property
+    def nbytes(self) -> int:
+        return int(
+            sum(
+                np.asarray(getattr(self, n)).nbytes
+                for n in ("coords", "directions", "density", "entry_offsets", "entry_direction",
+                          "entry_area", "entry_kd", "entry_ks", "entry_shininess",
+                          "entry_centroid", "entry_normal")
+            )
+        )  # fmt: skip
+
+    def total_area(self) -> float:
+        """Registered facet area, world units squared (equals the mesh area)."""
+        return float(np.sum(self.entry_area) * self.voxel_size**2)
+
+    def coverage(self, w: np.ndarray) -> np.ndarray:
+        """(M,) fraction ``D_v(w) / P(w)`` of each voxel covered seen along the
+        unit vector ``w``, from the density sample nearest ``w``; may exceed 1."""
+        w = np.asarray(w, dtype=np.float64)
+        w = w / np.linalg.norm(w)
+        p = int(np.argmax(np.abs(self.directions @ w)))
+        return self.density[:, p] / np.abs(w).sum()
+
+    # ---------------------------------------------------------------- points
+
+    def to_points(
+        self,
+        placement: str = "centroid",
+        per_entry: int = 1,
+        normal: str = "mean",
+    ) -> PointCloud:
+        """Oriented points from the shading entries (paper section 3.1).
+
+        Every entry becomes ``per_entry`` points whose areas sum to the entry's
+        facet area. ``placement`` puts them at the facets' area-weighted
+        ``centroid`` (on the true surface), the voxel ``center``, or on the
+        voxel's virtual ``sphere`` (radius h/2) in the entry's sample direction.
+        ``normal`` is the facets' area-weighted ``mean`` normal or the entry's
+        ``sample`` direction N_p (the paper's reading).
+        """
+        if placement not in PLACEMENTS:
+            raise InputError(f"unknown placement '{placement}'; choose one of {', '.join(PLACEMENTS)}")
+        if normal not in POINT_NORMALS:
+            raise InputError(f"unknown point normal '{normal}'; choose one of {', '.join(POINT_NORMALS)}")
+        if isinstance(per_entry, bool) or int(per_entry) != per_entry or per_entry < 1:
+            raise InputError(f"points per entry must be a whole number >= 1, got {per_entry!r}")
+        per_entry = int(per_entry)
+        h = float(self.voxel_size)
+        sample_n = self.directions[self.entry_direction]
+        if normal == "mean":
+            mean = self.entry_normal.astype(np.float64)
+            length = np.linalg.norm(mean, axis=1)
+            # Facets that cancel (a two-sided sheet registered both ways) have no
+            # mean direction; the sample direction is the honest fallback.
+            nrm = np.where((length > 1e-6)[:, None], mean / np.maximum(length, 1e-300)[:, None], sample_n)
+        else:
+            nrm = sample_n
+        if placement == "centroid":
+            pos = self.entry_centroid.astype(np.float64)
+        else:
+            centre = self.grid.cell_centers(self.coords)[self.entry_voxel]
+            pos = centre if placement == "center" else centre + 0.5 * h * sample_n
+        area = self.entry_area * h * h
+        kd, ks, sh = self.entry_kd, self.entry_ks, self.entry_shininess
+        if per_entry > 1:
+            pos, nrm, area, kd, ks, sh = _spread(pos, nrm, area, kd, ks, sh, per_entry, h)
+        return PointCloud(pos, nrm, area, kd, ks, sh, name=str(self.meta.get("source", "points")))
+
+    # ------------------------------------------------------------------ I/O
+
+    _ARRAYS = ("origin", "shape", "coords", "directions", "density", "entry_offsets",
+               "entry_direction", "entry_area", "entry_kd", "entry_ks", "entry_shininess",
+               "entry_centroid", "entry_normal")  # fmt: skip
+
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write a versioned ``.a3d`` file (a zip of .npy arrays and a JSON header
+        with a SHA-256 of the arrays); loads without pickle. Written atomically."""
+        arrays = {n: np.ascontiguousarray(getattr(self, n)) for n in self._ARRAYS}
+        digest = _digest(arrays)
+        header = {
+            "format": FORMAT_NAME,
+            "version": FORMAT_VERSION,
+            "voxel_size": float(self.voxel_size),
+            "sha256": digest,
+            "meta": _jsonable(self.meta),
+        }
+        buf = io.BytesIO()
+        with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_STORED) as zf:
+            zf.writestr("header.json", json.dumps(header, indent=1))
+            for n, a in arrays.items():
+                b = io.BytesIO()
+                np.save(b, a, allow_pickle=False)
+                zf.writestr(n + ".npy", b.getvalue())
+        return atomic_write(path, buf.getvalue())
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> AnisoTexture:
+        """Read a file written by :meth:`save`; refuse foreign, damaged or newer files."""
+        p = check_readable_file(path, "texture")
+        try:
+            zf = zipfile.ZipFile(p)
+        except (zipfile.BadZipFile, OSError):
+            raise FormatError(
+                f"'{p}' is not an aniso3d texture file (not a zip container); "
+                "make one with 'aniso3d build MESH -o out.a3d'"
+            ) from None
+        with zf:
+            try:
+                header = json.loads(zf.read("header.json"))
+            except KeyError:
+                raise FormatError(f"'{p}' is a zip file but not an aniso3d texture (no header.json)") from None
+            except (ValueError, zipfile.BadZipFile, OSError) as exc:
+                raise FormatError(f"'{p}' has a damaged header: {exc}") from None
+            if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:
+                raise FormatError(f"'{p}' is not an aniso3d texture file (format is {header.get('format')!r})")
+            version = header.get("version")
+            if not isinstance(version, int) or version > FORMAT_VERSION or version < 1:
+                raise FormatError(
+                    f"'{p}' has texture format version {version!r}; this aniso3d reads version "
+                    f"{FORMAT_VERSION}. Upgrade aniso3d or rebuild the texture from its mesh"
+                )
+            arrays = {}
+            try:
+                for n in cls._ARRAYS:
+                    arrays[n] = np.load(io.BytesIO(zf.read(n + ".npy")), allow_pickle=False)
+            except KeyError as exc:
+                raise FormatError(f"'{p}' is missing array {exc}; the file is damaged") from None
+            except (ValueError, zipfile.BadZipFile, OSError, EOFError) as exc:
+                raise FormatError(f"'{p}' is damaged ({type(exc).__name__}: {exc}); rebuild it") from None
+        if _digest(arrays) != header.get("sha256"):
+            raise FormatError(f"'{p}' failed its checksum: the file is damaged; rebuild it from its mesh")
+        return cls(voxel_size=float(header["voxel_size"]), meta=header.get("meta", {}), **arrays)
+
+
+def _digest(arrays: dict[str, np.ndarray]) -> str:
+    h = hashlib.sha256()
+    for n in sorted(arrays):
+        a = np.ascontiguousarray(arrays[n])
+        h.update(f"{n}:{a.dtype.str}:{a.shape}".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def _jsonable(meta: dict) -> dict:
+    out = {}
+    for key, value in meta.items():
+        if isinstance(value, np.generic):
+            value = value.item()
+        if isinstance(value, (str, int, float, bool)) or value is None:
+            out[str(key)] = value
+    return out
+
+
+def _tangent_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors (N, 3) perpendicular to unit normals n and each other."""
+    helper = np.where((np.abs(n[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    t = np.cross(n, helper)
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    return t, np.cross(n, t)
+
+
+def _spread(pos, nrm, area, kd, ks, sh, m, h):
+    """Split each point into m points of area/m on a Vogel spiral in its tangent
+    plane, over a disc of the point's total area (kept inside the voxel)."""
+    t, b = _tangent_basis(nrm)
+    i = np.arange(m)
+    r = np.sqrt((i + 0.5) / m)
+    ang = i * np.pi * (3.0 - np.sqrt(5.0))
+    radius = np.minimum(np.sqrt(area / np.pi), 0.5 * h)[:, None]
+    offs = (radius * r * np.cos(ang))[:, :, None] * t[:, None] + (radius * r * np.sin(ang))[:, :, None] * b[:, None]
+    newpos = (pos[:, None] + offs).reshape(-1, 3)
+    rep = lambda a: np.repeat(a, m, axis=0)  # noqa: E731
+    return newpos, rep(nrm), rep(area / m), rep(kd), rep(ks), rep(sh)
+
+
+# ------------------------------------------------------------------- registration
+
+#: Triangles clipped per batch: bounds the clipper's working memory (~ a few
+#: hundred MB at most) whatever the mesh size.
+CLIP_BATCH = 65536
+#: Sub-polygons registered per batch (rows of the S x K direction products).
+REGISTER_BATCH = 32768
+
+
+def estimate_build_bytes(mesh: Mesh, resolution: int, directions: int) -> int:
+    """Rough upper estimate of a build's peak memory, used to refuse builds
+    that cannot fit before any work is done."""
+    # Occupied voxels are bounded by the grid and by what the surface can touch:
+    # area / h^2 * ~3 cells per unit area (a plane crosses up to sqrt(3) cells
+    # per h^2 of area) plus a few per triangle.
+    b = mesh.bounds
+    longest = float(np.max(b[1] - b[0])) or 1.0
+    h = longest / resolution
+    shape = np.maximum(1, np.ceil((b[1] - b[0]) / h))
+    cells = float(np.prod(shape))
+    surface_cells = 3.0 * mesh.area() / (h * h) + 3.0 * mesh.n_faces
+    voxels = min(cells, surface_cells)
+    subpolys = surface_cells
+    return int(voxels * directions * 8 * 2 + subpolys * 120 + CLIP_BATCH * 4000)
+
+
+def build_texture(
+    mesh: Mesh,
+    resolution: int = 128,
+    directions: int = 64,
+    *,
+    direction_set: str = "fibonacci",
+    seed: int = 0,
+    bounds: np.ndarray | None = None,
+    progress=None,
+    timings: dict | None = None,
+    memory_limit: int | None = None,
+) -> AnisoTexture:
+    """Build the anisotropic 3D texture of ``mesh``.
+
+    Args:
+        resolution: voxels along the longest axis of ``bounds`` (the paper: 128).
+        directions: K, sample directions shared by density and shading spheres.
+        direction_set: "fibonacci" (deterministic, default) or "random" (seeded).
+        bounds: (2, 3) world box to grid; the mesh's bounds by default. Pass the
+            same bounds to textures that must share a grid.
+        progress: optional callable ``progress(fraction, stage)`` for long builds.
+        timings: optional dict that receives seconds per stage.
+        memory_limit: bytes; a build estimated above it is refused up front.
+            Default: the machine's available memory.
+    """
+    if not isinstance(mesh, Mesh):
+        raise InputError(f"build_texture needs an aniso3d.Mesh, got {type(mesh).__name__}")
+    dirs = sphere_directions(directions, direction_set, seed)
+    if bounds is None:
+        bounds = mesh.bounds
+    grid = make_grid(np.asarray(bounds, dtype=np.float64), resolution)
+    need = estimate_build_bytes(mesh, resolution, len(dirs))
+    limit = memory_limit if memory_limit is not None else _available_memory()
+    if limit is not None and need > limit:
+        raise InputError(
+            f"building at resolution {resolution} with {len(dirs)} directions needs an estimated "
+            f"{need / 2**30:.1f} GiB, more than the {limit / 2**30:.1f} GiB available; "
+            "lower --resolution or --directions"
+        )
+    timings = {} if timings is None else timings
+    report = progress or (lambda fraction, stage: None)
+
+    # ---- clip, in batches of triangles
+    t0 = time.perf_counter()
+    tri = grid.to_grid(mesh.triangles)
+    normals, _ = triangle_normals(tri)
+    pieces = []
+    n = len(tri)
+    for start in range(0, n, CLIP_BATCH):
+        stop = min(n, start + CLIP_BATCH)
+        pieces.append(
+            clip_to_grid(tri[start:stop], normals[start:stop], grid.shape, np.arange(start, stop))
+        )
+        report(0.6 * stop / n, "clip")
+    face = np.concatenate([p.face for p in pieces])
+    cell = np.concatenate([p.cell for p in pieces])
+    S = np.concatenate([p.area for p in pieces])
+    centroid = np.concatenate([p.centroid for p in pieces])
+    del pieces
+    timings["clip"] = time.perf_counter() - t0
+    n_sub = len(S)
+
+    # ---- register
+    t0 = time.perf_counter()
+    sy, sz = int(grid.shape[1]), int(grid.shape[2])
+    key = (cell[:, 0] * sy + cell[:, 1]) * sz + cell[:, 2]
+    order = np.argsort(key, kind="stable")
+    key, face, S, centroid = key[order], face[order], S[order], centroid[order]
+    N = normals[face]
+    vox_keys, vox_start = np.unique(key, return_index=True)
+    M, K = len(vox_keys), len(dirs)
+    voxel_of = np.repeat(np.arange(M), np.diff(np.append(vox_start, n_sub)))
+    density = np.zeros((M, K))
+    nearest = np.empty(n_sub, dtype=np.int64)
+    # Batches end on voxel boundaries so reduceat never splits a voxel.
+    bounds_idx = _batch_bounds(vox_start, n_sub, REGISTER_BATCH)
+    for b0, b1 in zip(bounds_idx[:-1], bounds_idx[1:], strict=True):
+        r0, r1 = vox_start[b0], (vox_start[b1] if b1 < M else n_sub)
+        dots = N[r0:r1] @ dirs.T
+        nearest[r0:r1] = np.argmax(dots, axis=1)
+        contrib = np.abs(dots) * S[r0:r1, None]
+        density[b0:b1] = np.add.reduceat(contrib, vox_start[b0:b1] - r0, axis=0)
+        report(0.6 + 0.3 * r1 / max(n_sub, 1), "register")
+
+    # Shading entries: one per (voxel, nearest sample) pair; sorted by voxel.
+    ekey = voxel_of * K + nearest
+    ekeys, einv = np.unique(ekey, return_inverse=True)
+    E = len(ekeys)
+    e_area = np.bincount(einv, weights=S, minlength=E)
+
+    def wmean(values: np.ndarray) -> np.ndarray:
+        if values.ndim == 1:
+            return np.bincount(einv, weights=S * values, minlength=E) / e_area
+        return np.stack([wmean(values[:, i]) for i in range(values.shape[1])], axis=1)
+
+    e_kd = wmean(mesh.kd[face].astype(np.float64))
+    e_ks = wmean(mesh.ks[face].astype(np.float64))
+    e_sh = wmean(mesh.shininess[face].astype(np.float64))
+    e_cent = grid.origin + wmean(centroid) * grid.voxel_size
+    e_norm = wmean(N)
+    e_voxel = ekeys // K
+    offsets = np.zeros(M + 1, dtype=np.int64)
+    offsets[1:] = np.cumsum(np.bincount(e_voxel, minlength=M))
+    coords = np.stack([vox_keys // (sy * sz), (vox_keys // sz) % sy, vox_keys % sz], axis=1)
+    timings["register"] = time.perf_counter() - t0
+    report(1.0, "register")
+
+    return AnisoTexture(
+        origin=grid.origin,
+        voxel_size=grid.voxel_size,
+        shape=np.asarray(grid.shape, dtype=np.int64),
+        coords=coords.astype(np.int32),
+        directions=dirs,
+        density=density,
+        entry_offsets=offsets,
+        entry_direction=(ekeys % K).astype(np.int32),
+        entry_area=e_area,
+        entry_kd=e_kd.astype(np.float32),
+        entry_ks=e_ks.astype(np.float32),
+        entry_shininess=e_sh.astype(np.float32),
+        entry_centroid=e_cent,
+        entry_normal=e_norm.astype(np.float32),
+        meta={
+            "direction_set": direction_set,
+            "seed": int(seed),
+            "source": mesh.name,
+            "n_triangles": int(mesh.n_faces),
+            "n_subpolygons": int(n_sub),
+            "mesh_area": float(mesh.area()),
+            "mesh_nbytes": int(mesh.nbytes),
+        },
+    )
+
+
+def _batch_bounds(starts: np.ndarray, total: int, batch: int) -> list[int]:
+    """Voxel indices that split rows into batches of about ``batch`` rows."""
+    M = len(starts)
+    if M == 0:
+        return [0]
+    cuts = np.searchsorted(starts, np.arange(batch, total, batch), side="right") - 1
+    cuts = np.unique(np.concatenate([[0], cuts[cuts > 0], [M]]))
+    return [int(c) for c in cuts]
+
+
+def _available_memory() -> int | None:
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        return None
+    return None
