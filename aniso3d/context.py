@@ -1,0 +1,232 @@
+"""The GPU context: owns the OpenGL context, the program cache and every GPU
+object the renderers make, and releases them deterministically.
+
+Headless by default: EGL first (Mesa's llvmpipe works without a GPU), then
+OSMesa (through PyOpenGL and libosmesa6, for machines without EGL), then X11
+where ``DISPLAY`` is set. Renderers never create a context; they are handed
+one.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from typing import Any
+
+import moderngl
+
+from .errors import ResourceError
+from .shaderlib import preprocess
+
+log = logging.getLogger("aniso3d")
+
+BACKENDS = ("egl", "osmesa", "x11")
+REQUIRE = 330
+
+INSTALL_HINT = (
+    "aniso3d needs OpenGL 3.3 or newer. On Debian/Ubuntu install Mesa's software "
+    "renderer: 'apt-get install libegl1 libgl1-mesa-dri' (EGL, headless), or "
+    "'apt-get install libosmesa6' plus 'pip install PyOpenGL' (OSMesa)"
+)
+
+
+class _OSMesaLoader:
+    """Loader for moderngl.init_context over an OSMesa context made current."""
+
+    def __init__(self, size=(16, 16)):
+        os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
+        import ctypes
+
+        from OpenGL import GL, osmesa  # noqa: F401  (PyOpenGL, optional)
+
+        self._osmesa = osmesa
+        attrs = [
+            osmesa.OSMESA_FORMAT, osmesa.OSMESA_RGBA,
+            osmesa.OSMESA_DEPTH_BITS, 24,
+            osmesa.OSMESA_PROFILE, osmesa.OSMESA_CORE_PROFILE,
+            osmesa.OSMESA_CONTEXT_MAJOR_VERSION, 3,
+            osmesa.OSMESA_CONTEXT_MINOR_VERSION, 3,
+            0,
+        ]  # fmt: skip
+        self.ctx = osmesa.OSMesaCreateContextAttribs(attrs, None)
+        if not self.ctx:
+            raise RuntimeError("OSMesaCreateContextAttribs failed")
+        self.buf = (ctypes.c_ubyte * (size[0] * size[1] * 4))()
+        if not osmesa.OSMesaMakeCurrent(self.ctx, self.buf, GL.GL_UNSIGNED_BYTE, size[0], size[1]):
+            raise RuntimeError("OSMesaMakeCurrent failed")
+
+    def load_opengl_function(self, name: str) -> int:
+        import ctypes
+
+        ptr = self._osmesa.OSMesaGetProcAddress(name)
+        return ctypes.cast(ptr, ctypes.c_void_p).value or 0
+
+    def release(self) -> None:
+        if self.ctx:
+            self._osmesa.OSMesaDestroyContext(self.ctx)
+            self.ctx = None
+
+
+def _create(backend: str) -> tuple[moderngl.Context, Any]:
+    if backend == "egl":
+        return moderngl.create_standalone_context(backend="egl", require=REQUIRE), None
+    if backend == "x11":
+        if not os.environ.get("DISPLAY"):
+            raise RuntimeError("DISPLAY is not set")
+        return moderngl.create_standalone_context(require=REQUIRE), None
+    if backend == "osmesa":
+        loader = _OSMesaLoader()
+        moderngl.init_context(loader=loader)
+        ctx = moderngl.get_context()
+        # get_context() keeps a module-level default; we own this one.
+        import moderngl as _m
+
+        _m._store.default_context = None
+        if ctx.version_code < REQUIRE:
+            raise RuntimeError(f"OSMesa gave OpenGL {ctx.version_code}, need {REQUIRE}")
+        return ctx, loader
+    raise ValueError(backend)
+
+
+class GLContext:
+    """An OpenGL context with a program cache and an inventory of GPU objects.
+
+    Use as a context manager, or call :meth:`release`. ``backend`` is "auto"
+    (EGL, then OSMesa, then X11), or one of :data:`BACKENDS`.
+    """
+
+    def __init__(self, backend: str = "auto"):
+        if backend != "auto" and backend not in BACKENDS:
+            raise ResourceError(f"unknown OpenGL backend '{backend}'; choose auto or one of {BACKENDS}")
+        order = BACKENDS if backend == "auto" else (backend,)
+        errors = []
+        self.ctx: moderngl.Context | None = None
+        self._loader = None
+        for name in order:
+            try:
+                self.ctx, self._loader = _create(name)
+                self.backend = name
+                break
+            except Exception as exc:  # every backend fails in its own way
+                errors.append(f"{name}: {type(exc).__name__}: {exc}")
+        if self.ctx is None:
+            raise ResourceError(
+                "no OpenGL 3.3+ context could be created (" + "; ".join(errors) + "). " + INSTALL_HINT
+            )
+        info = self.ctx.info
+        self.renderer = str(info.get("GL_RENDERER", "?"))
+        self.version = str(info.get("GL_VERSION", "?"))
+        self.software = any(s in self.renderer.lower() for s in ("llvmpipe", "softpipe", "swrast"))
+        self.max_texture_size = int(info.get("GL_MAX_TEXTURE_SIZE", 8192))
+        self.max_viewport = tuple(int(x) for x in info.get("GL_MAX_VIEWPORT_DIMS", (8192, 8192)))
+        log.info(
+            "OpenGL context: %s via %s (%s)%s",
+            self.renderer, self.backend, self.version, " [software]" if self.software else "",
+        )  # fmt: skip
+        self._programs: dict[tuple, moderngl.Program] = {}
+        self._objects: list[Any] = []
+
+    # ------------------------------------------------------------ resources
+
+    def _check(self) -> moderngl.Context:
+        if self.ctx is None:
+            raise ResourceError("this GLContext was released; create a new one")
+        return self.ctx
+
+    def track(self, obj):
+        """Register a GPU object to be released with the context; returns it."""
+        self._objects.append(obj)
+        return obj
+
+    def free(self, *objs) -> None:
+        """Release GPU objects now (and forget them)."""
+        for obj in objs:
+            if obj is None:
+                continue
+            try:
+                obj.release()
+            finally:
+                if obj in self._objects:
+                    self._objects.remove(obj)
+
+    def program(
+        self,
+        vertex: str,
+        fragment: str,
+        geometry: str | None = None,
+        defines: dict[str, object] | None = None,
+    ) -> moderngl.Program:
+        """A compiled program from shader files, cached by files and defines."""
+        key = (vertex, fragment, geometry, tuple(sorted((defines or {}).items())))
+        prog = self._programs.get(key)
+        if prog is None:
+            ctx = self._check()
+            src = {
+                "vertex_shader": preprocess(vertex, defines),
+                "fragment_shader": preprocess(fragment, defines),
+            }
+            if geometry:
+                src["geometry_shader"] = preprocess(geometry, defines)
+            try:
+                prog = ctx.program(**src)
+            except moderngl.Error as exc:
+                raise ResourceError(f"shader compile/link failed for {vertex}+{fragment}: {exc}") from None
+            self._programs[key] = prog
+        return prog
+
+    def compute(self, name: str, defines: dict[str, object] | None = None):
+        key = (name, "compute", None, tuple(sorted((defines or {}).items())))
+        prog = self._programs.get(key)
+        if prog is None:
+            try:
+                prog = self._check().compute_shader(preprocess(name, defines))
+            except moderngl.Error as exc:
+                raise ResourceError(f"compute shader {name} failed to compile: {exc}") from None
+            self._programs[key] = prog
+        return prog
+
+    @staticmethod
+    def set_uniforms(prog: moderngl.Program, values: dict[str, object], strict: bool = True) -> None:
+        """Set uniforms by name; a name the program lacks is an error when
+        ``strict`` (catches typos), unless the compiler optimised it away, which
+        we cannot tell apart, so optional uniforms pass ``strict=False``."""
+        for name, value in values.items():
+            if name in prog:
+                prog[name].value = value
+            elif strict:
+                raise ResourceError(f"shader program has no active uniform '{name}'")
+
+    @property
+    def n_objects(self) -> int:
+        return len(self._objects)
+
+    def release(self) -> None:
+        """Release every tracked object, every program, then the context."""
+        if self.ctx is None:
+            return
+        for obj in reversed(self._objects):
+            try:
+                obj.release()
+            except Exception:  # already released by its owner
+                pass
+        self._objects.clear()
+        for prog in self._programs.values():
+            prog.release()
+        self._programs.clear()
+        self.ctx.release()
+        self.ctx = None
+        if self._loader is not None:
+            self._loader.release()
+            self._loader = None
+
+    def __enter__(self) -> GLContext:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+    def __del__(self) -> None:  # last resort; release() is the contract
+        try:
+            self.release()
+        except Exception:
+            pass

@@ -1,0 +1,78 @@
+"""Renderer (a): the polygon model itself, per-face Phong, the ground truth.
+
+Supersampling is the frame's business (:class:`~aniso3d.renderer.Renderer`
+draws at ``ssaa`` times the size and box-filters); this module only draws.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import moderngl
+import numpy as np
+
+from .context import GLContext
+from .frame import FrameView
+from .mesh import Mesh
+
+
+@dataclass(eq=False)
+class GPUMesh:
+    """A mesh uploaded once: unshared vertices relative to ``origin``."""
+
+    vao: moderngl.VertexArray
+    vbo: moderngl.Buffer
+    origin: np.ndarray
+    bounds: np.ndarray
+    n_faces: int
+    nbytes: int
+
+
+class MeshRenderer:
+    """Draws a :class:`~aniso3d.mesh.Mesh` with flat face normals and two-sided Phong."""
+
+    method = "mesh"
+
+    def __init__(self, gl: GLContext):
+        self.gl = gl
+        self.prog = gl.program("mesh.vert", "mesh.frag")
+
+    def upload(self, mesh: Mesh) -> GPUMesh:
+        bounds = mesh.bounds
+        origin = 0.5 * (bounds[0] + bounds[1])
+        tri = mesh.triangles - origin  # float64 subtraction, then float32
+        cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        length = np.linalg.norm(cross, axis=1, keepdims=True)
+        normal = np.where(length > 0, cross / np.where(length > 0, length, 1), 0.0)
+        n = mesh.n_faces
+        data = np.empty((n, 3, 11), dtype=np.float32)
+        data[:, :, 0:3] = tri
+        data[:, :, 3:6] = normal[:, None]
+        data[:, :, 6:9] = mesh.kd[:, None]
+        data[:, :, 9] = mesh.ks[:, None]
+        data[:, :, 10] = mesh.shininess[:, None]
+        vbo = self.gl.track(self.gl.ctx.buffer(data.tobytes()))
+        vao = self.gl.track(
+            self.gl.ctx.vertex_array(
+                self.prog, [(vbo, "3f 3f 3f 2f", "in_position", "in_normal", "in_kd", "in_spec")]
+            )
+        )
+        return GPUMesh(vao, vbo, origin, bounds, n, data.nbytes)
+
+    def draw(self, handle: GPUMesh, view: FrameView, fbo=None) -> None:
+        ctx = self.gl.ctx
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
+        GLContext.set_uniforms(
+            self.prog,
+            {
+                "u_mvp": view.mvp(handle.origin),
+                "u_eye": view.eye_local(handle.origin),
+                **view.lighting.uniforms(),
+            },
+            strict=False,
+        )
+        handle.vao.render(moderngl.TRIANGLES)
+
+    def release(self, handle: GPUMesh) -> None:
+        self.gl.free(handle.vao, handle.vbo)
