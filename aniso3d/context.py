@@ -26,44 +26,56 @@ REQUIRE = 330
 INSTALL_HINT = (
     "aniso3d needs OpenGL 3.3 or newer. On Debian/Ubuntu install Mesa's software "
     "renderer: 'apt-get install libegl1 libgl1-mesa-dri' (EGL, headless), or "
-    "'apt-get install libosmesa6' plus 'pip install PyOpenGL' (OSMesa)"
+    "'apt-get install libosmesa6' (OSMesa)"
 )
 
 
 class _OSMesaLoader:
-    """Loader for moderngl.init_context over an OSMesa context made current."""
+    """Loader for ``moderngl.init_context`` over an OSMesa context made current.
+
+    Talks to Debian's libOSMesa (package libosmesa6) through ctypes, so no
+    extra Python package is needed.
+    """
+
+    # Constants from GL/osmesa.h.
+    FORMAT, RGBA, DEPTH_BITS = 0x22, 0x1908, 0x30
+    PROFILE, CORE_PROFILE, MAJOR, MINOR = 0x33, 0x34, 0x36, 0x37
+    GL_UNSIGNED_BYTE = 0x1401
 
     def __init__(self, size=(16, 16)):
-        os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
         import ctypes
+        import ctypes.util
 
-        from OpenGL import GL, osmesa  # noqa: F401  (PyOpenGL, optional)
-
-        self._osmesa = osmesa
-        attrs = [
-            osmesa.OSMESA_FORMAT, osmesa.OSMESA_RGBA,
-            osmesa.OSMESA_DEPTH_BITS, 24,
-            osmesa.OSMESA_PROFILE, osmesa.OSMESA_CORE_PROFILE,
-            osmesa.OSMESA_CONTEXT_MAJOR_VERSION, 3,
-            osmesa.OSMESA_CONTEXT_MINOR_VERSION, 3,
-            0,
-        ]  # fmt: skip
-        self.ctx = osmesa.OSMesaCreateContextAttribs(attrs, None)
+        name = ctypes.util.find_library("OSMesa") or "libOSMesa.so.8"
+        try:
+            lib = ctypes.CDLL(name)
+        except OSError:
+            raise RuntimeError("libOSMesa not found (Debian package libosmesa6)") from None
+        self.lib = lib
+        lib.OSMesaCreateContextAttribs.restype = ctypes.c_void_p
+        lib.OSMesaCreateContextAttribs.argtypes = [ctypes.POINTER(ctypes.c_int), ctypes.c_void_p]
+        lib.OSMesaMakeCurrent.restype = ctypes.c_ubyte
+        lib.OSMesaMakeCurrent.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_uint,
+                                          ctypes.c_int, ctypes.c_int]  # fmt: skip
+        lib.OSMesaGetProcAddress.restype = ctypes.c_void_p
+        lib.OSMesaGetProcAddress.argtypes = [ctypes.c_char_p]
+        lib.OSMesaDestroyContext.argtypes = [ctypes.c_void_p]
+        attrs = [self.FORMAT, self.RGBA, self.DEPTH_BITS, 24, self.PROFILE, self.CORE_PROFILE,
+                 self.MAJOR, 3, self.MINOR, 3, 0]  # fmt: skip
+        self.ctx = lib.OSMesaCreateContextAttribs((ctypes.c_int * len(attrs))(*attrs), None)
         if not self.ctx:
-            raise RuntimeError("OSMesaCreateContextAttribs failed")
+            raise RuntimeError("OSMesaCreateContextAttribs failed (no core profile 3.3)")
         self.buf = (ctypes.c_ubyte * (size[0] * size[1] * 4))()
-        if not osmesa.OSMesaMakeCurrent(self.ctx, self.buf, GL.GL_UNSIGNED_BYTE, size[0], size[1]):
+        if not lib.OSMesaMakeCurrent(self.ctx, self.buf, self.GL_UNSIGNED_BYTE, size[0], size[1]):
+            lib.OSMesaDestroyContext(self.ctx)
             raise RuntimeError("OSMesaMakeCurrent failed")
 
     def load_opengl_function(self, name: str) -> int:
-        import ctypes
-
-        ptr = self._osmesa.OSMesaGetProcAddress(name)
-        return ctypes.cast(ptr, ctypes.c_void_p).value or 0
+        return self.lib.OSMesaGetProcAddress(name.encode()) or 0
 
     def release(self) -> None:
         if self.ctx:
-            self._osmesa.OSMesaDestroyContext(self.ctx)
+            self.lib.OSMesaDestroyContext(self.ctx)
             self.ctx = None
 
 

@@ -29,3 +29,27 @@ def load_png(path: str | os.PathLike) -> np.ndarray:
 
     with Image.open(path) as im:
         return np.asarray(im.convert("RGB"))
+
+
+def label_panels(panels: list[np.ndarray], labels: list[str], gap: int = 8) -> np.ndarray:
+    """Panels of equal height side by side on white, each captioned below."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    h = max(p.shape[0] for p in panels)
+    font_px = max(12, h // 28)
+    try:
+        font = ImageFont.load_default(size=font_px)
+    except TypeError:  # Pillow < 10.1 has one bitmap size
+        font = ImageFont.load_default()
+    lines = max(label.count("\n") + 1 for label in labels)
+    caption = int(lines * font_px * 1.35) + gap
+    w = sum(p.shape[1] for p in panels) + gap * (len(panels) + 1)
+    canvas = Image.new("RGB", (w, h + caption + 2 * gap), (255, 255, 255))
+    draw = ImageDraw.Draw(canvas)
+    x = gap
+    for img, label in zip(panels, labels, strict=True):
+        canvas.paste(Image.fromarray(np.ascontiguousarray(img[:, :, :3])), (x, gap))
+        draw.rectangle([x - 1, gap - 1, x + img.shape[1], gap + img.shape[0]], outline=(200, 200, 200))
+        draw.multiline_text((x + 4, gap + h + gap // 2), label, fill=(0, 0, 0), font=font, spacing=4)
+        x += img.shape[1] + gap
+    return np.asarray(canvas)

@@ -133,6 +133,8 @@ class Renderer:
 
     def upload(self, thing, method: str, **build):
         """Convert and upload ``thing`` for ``method`` (cached); returns the handle."""
+        if method not in METHODS:
+            raise InputError(f"unknown render method '{method}'; choose one of {', '.join(METHODS)}")
         opts = {**DEFAULT_BUILD, **{k: v for k, v in build.items() if v is not None}}
         unknown = set(opts) - set(BUILD_OPTIONS)
         if unknown:

@@ -71,6 +71,9 @@ def preprocess(
             m = _INCLUDE.match(line)
             if m:
                 inc = m.group(1)
+                if inc in stack + (fname,):
+                    chain = " -> ".join(stack + (fname, inc))
+                    raise ShaderSourceError(f"circular #include: {chain}")
                 if inc not in included:
                     included.add(inc)
                     out += expand(inc, depth + 1, stack + (fname,))
