@@ -1,0 +1,560 @@
+"""Renderer (b): ray marching of the sparse anisotropic 3D texture (paper section 4 (b)).
+
+One ray per pixel (``shaders/volume.frag``), from the near plane, clipped to
+the grid's box. A two-level 3D DDA (Amanatides-Woo over 8^3 bricks, then over
+the voxels of occupied bricks) gives each voxel's exact chord, so nothing
+depends on a step size and an empty brick costs one lookup.
+
+A voxel seen along the unit ray direction w (METHOD.md "Reference
+conventions"), with ``P(w) = |wx| + |wy| + |wz|`` and h the voxel edge:
+
+- coverage over the mean chord ``h / P(w)`` is ``alpha = min(1, D_v(w) / P(w))``;
+- over a chord c, ``opacity="exponential"`` (default; Beer-Lambert with
+  ``sigma = -ln(1 - alpha) P / h``, alpha capped at :data:`ALPHA_MAX` so it
+  stays finite) multiplies the transmittance T by ``exp(-sigma c)``:
+  facets at independent random places. ``opacity="linear"`` subtracts
+  ``min(D, P) c / h`` from T (never below 0): coverage adds up along the ray.
+  Both give ``alpha`` over the mean chord. They differ across voxels: by
+  Crofton's formula a ray crossing a plane's layer of voxels adds up exactly
+  one crossing, so "linear" draws a single plane opaque from any angle, while
+  "exponential" lets ``(x / (1 + x))^(1 + x)`` through, with
+  ``x = (|wx| + |wy|) / |wz|`` in the plane's frame (0.29 at 60 degrees off
+  its normal, 0.05 at 4 degrees). For foliage, the paper's object, leaves
+  really are scattered and the exponential law is the closer one (default
+  tree at 128^3: coverage 1.011 x the polygons' against 1.082, alpha RMSE
+  0.031 against 0.050); for solid surfaces "linear" is (quad at 60 degrees:
+  coverage 1.00 against 0.73);
+- colour: the shaded colours of its shading entries (``shade()`` of
+  ``lighting.glsl``; the view vector is -w, exact for every point of the
+  ray) weighted by ``A_e |n_e . w|``, ``n_e`` the entry's mean facet normal
+  (``normal="mean"``) or its sample direction (``normal="sample"``, the
+  paper's reading); each shaded colour is clamped to [0, 1] first, as the
+  polygon renderer clamps each fragment.
+
+Front to back, stopping when T falls below :data:`T_MIN`. The pixel is
+``C + T * background`` (C premultiplied), alpha ``1 - T``, and the depth is
+where ``1 - T`` first reaches 0.5 (1.0, the clear value, if it never does).
+
+Reading the density sphere along w (``density=``); D is even, so a sample
+N_p also stands at -N_p:
+
+- ``"nearest"``: the sample nearest the line of w (what
+  :meth:`AnisoTexture.coverage` reads);
+- ``"kernel"``: the 4 samples nearest the line of w, weighted
+  ``((R - a) / (R a))^2`` (Franke-Little; a the angle to w, R the angle of
+  the 5th nearest): continuous in w and exact at the samples, but like any
+  average of samples it cannot reach the peak ``|N . w| = 1`` of a plane
+  seen head-on between samples (0.984 at K = 64);
+- ``"facet"`` (default): the shading entries' own projected area
+  ``F(w) = sum_e A_e |n_e . w|`` plus the kernel interpolation of the
+  residual ``D_v(N_p) - F(N_p)``. Exact at the samples like "kernel", and
+  exact in every direction when each entry's facets are flat (a plane
+  head-on gives exactly 1). Relative L1 error against the exact
+  ``sum S |N . w|`` at K = 64: sphere 0.125 / 0.093 / 0.0011, tree
+  0.080 / 0.059 / 0.0002 (nearest / kernel / facet).
+
+The 4 samples and weights depend only on w, so they are found once per ray.
+
+:func:`march_ray_np` is the slow, obvious twin of one GPU pixel (a plain
+voxel DDA over the whole grid, float64); the tests hold the two together.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import moderngl
+import numpy as np
+
+from .context import GLContext
+from .errors import InputError, ResourceError
+from .frame import FrameView
+from .lighting import Lighting, shade_np
+from .texture import AnisoTexture
+
+#: Brick edge in voxels of the two-level index.
+BRICK = 8
+#: Coverage cap: a voxel at full coverage lets 1e-6 through along its mean chord.
+ALPHA_MAX = 1.0 - 1e-6
+#: Early ray termination: stop when the transmittance falls below this.
+T_MIN = 1e-3
+#: Density samples interpolated per ray direction.
+NEIGHBOURS = 4
+
+STEPS = ("dda",)
+DENSITY_MODES = ("facet", "kernel", "nearest")
+NORMAL_MODES = ("mean", "sample")
+OPACITY_MODES = ("exponential", "linear")
+#: OpenGL version the shaders need (shader storage buffers).
+REQUIRE_GL = 430
+_BIG = 1e30
+
+
+# ------------------------------------------------------------------ the reading
+
+
+def direction_weights(
+    directions: np.ndarray, w: np.ndarray, mode: str = "facet"
+) -> tuple[np.ndarray, np.ndarray]:
+    """Sample indices (4,) and weights (4,) that interpolate an even function on
+    the sphere along the unit vector ``w`` from its values at ``directions``
+    (K, 3). Mirrors ``neighbours()`` in volume.frag; "nearest" puts all the
+    weight on the first index."""
+    dirs = np.asarray(directions, dtype=np.float64)
+    K = len(dirs)
+    c = np.abs(dirs @ np.asarray(w, dtype=np.float64))
+    order = np.argsort(-c, kind="stable")
+    idx = np.zeros(NEIGHBOURS, dtype=np.int64)
+    k = min(NEIGHBOURS, K)
+    idx[:k] = order[:k]
+    ang = np.arccos(np.clip(c[order[: k + 1]], 0.0, 1.0))
+    radius = ang[NEIGHBOURS] if K > NEIGHBOURS else 2.0
+    wt = np.zeros(NEIGHBOURS)
+    a = np.maximum(ang[:k], 1e-6)
+    wt[:k] = np.where(a < radius, ((radius - a) / (radius * a)) ** 2, 0.0)
+    s = wt.sum()
+    if mode == "nearest" or ang[0] <= 1e-6 or not (0.0 < s < np.inf):
+        wt = np.array([1.0, 0.0, 0.0, 0.0])
+    else:
+        wt /= s
+    return idx, wt
+
+
+def _entry_rows(texture: AnisoTexture, voxels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Entry indices of ``voxels`` and, for each, its position in ``voxels``."""
+    off = np.asarray(texture.entry_offsets)
+    start, stop = off[voxels], off[voxels + 1]
+    counts = stop - start
+    owner = np.repeat(np.arange(len(voxels)), counts)
+    first = np.repeat(start - np.concatenate([[0], np.cumsum(counts)[:-1]]), counts)
+    return first + np.arange(int(counts.sum())), owner
+
+
+def density_along(
+    texture: AnisoTexture, w: np.ndarray, mode: str = "facet", voxels: np.ndarray | None = None
+) -> np.ndarray:
+    """(V,) projected facet area ``D_v(w)`` (units of h^2) of ``voxels`` (default:
+    all) seen along the unit vector ``w``, read from the density sphere as
+    ``mode`` says (see the module docstring). Never negative."""
+    _check_choice(mode, DENSITY_MODES, "density reading")
+    w = np.asarray(w, dtype=np.float64)
+    w = w / np.linalg.norm(w)
+    voxels = np.arange(texture.n_voxels) if voxels is None else np.asarray(voxels, dtype=np.int64)
+    idx, wt = direction_weights(texture.directions, w, mode)
+    dens = np.asarray(texture.density)[voxels][:, idx]
+    if mode != "facet":
+        return np.maximum(dens @ wt, 0.0)
+    rows, owner = _entry_rows(texture, voxels)
+    n = np.asarray(texture.entry_normal, dtype=np.float64)[rows]
+    area = np.asarray(texture.entry_area, dtype=np.float64)[rows]
+    base_w = np.bincount(owner, area * np.abs(n @ w), minlength=len(voxels))
+    nb = np.abs(n @ texture.directions[idx].T) * area[:, None]
+    base_nb = np.stack(
+        [np.bincount(owner, nb[:, j], minlength=len(voxels)) for j in range(NEIGHBOURS)], 1
+    )
+    return np.maximum(base_w + (dens - base_nb) @ wt, 0.0)
+
+
+def voxel_colors(
+    texture: AnisoTexture, w: np.ndarray, lighting: Lighting, normal: str = "mean",
+    voxels: np.ndarray | None = None,
+) -> np.ndarray:  # fmt: skip
+    """(V, 3) colour of ``voxels`` seen along the unit ray direction ``w``: the
+    shaded entries (each clamped to [0, 1]) weighted by ``A |n . w|``."""
+    _check_choice(normal, NORMAL_MODES, "normal")
+    w = np.asarray(w, dtype=np.float64)
+    w = w / np.linalg.norm(w)
+    voxels = np.arange(texture.n_voxels) if voxels is None else np.asarray(voxels, dtype=np.int64)
+    rows, owner = _entry_rows(texture, voxels)
+    if normal == "mean":
+        n = np.asarray(texture.entry_normal, dtype=np.float64)[rows]
+    else:
+        n = texture.directions[texture.entry_direction[rows]]
+    area = np.asarray(texture.entry_area, dtype=np.float64)[rows]
+    c = shade_np(
+        n,
+        -w,
+        texture.entry_kd[rows],
+        texture.entry_ks[rows],
+        texture.entry_shininess[rows],
+        lighting,
+    )
+    c = np.clip(c, 0.0, 1.0)
+    wgt = area * np.abs(n @ w)
+    V = len(voxels)
+    sum_w = np.bincount(owner, wgt, minlength=V)
+    sum_a = np.bincount(owner, area, minlength=V)
+    col_w = np.stack([np.bincount(owner, wgt * c[:, i], minlength=V) for i in range(3)], 1)
+    col_a = np.stack([np.bincount(owner, area * c[:, i], minlength=V) for i in range(3)], 1)
+    use_w = sum_w > 1e-7 * sum_a
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = np.where(use_w[:, None], col_w / sum_w[:, None], col_a / sum_a[:, None])
+    return np.where(np.isfinite(out), out, 0.0)
+
+
+# ------------------------------------------------------------ the NumPy ray
+
+
+@dataclass
+class RayTrace:
+    """What one NumPy ray met: per crossed occupied voxel its index, entry
+    parameter and chord (world units), and the result."""
+
+    voxels: list[int] = field(default_factory=list)
+    t_enter: list[float] = field(default_factory=list)
+    chords: list[float] = field(default_factory=list)
+    rgb: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    alpha: float = 0.0
+    t50: float | None = None
+
+
+def march_ray_np(
+    texture: AnisoTexture,
+    origin,
+    direction,
+    lighting: Lighting,
+    t_range: tuple[float, float] = (0.0, np.inf),
+    density: str = "facet",
+    normal: str = "mean",
+    opacity: str = "exponential",
+) -> tuple[np.ndarray, float]:
+    """One ray through ``texture``, the slow twin of a GPU pixel.
+
+    ``origin`` (3,) and ``direction`` (3,) are world; ``t_range`` limits the
+    ray parameter (world distance along the unit direction; the renderer
+    passes the near and far planes). Returns the pixel's (3,) RGB in [0, 1],
+    ``C + T * background``, and its alpha ``1 - T``.
+    """
+    tr = trace_ray_np(texture, origin, direction, lighting, t_range, density, normal, opacity)
+    return tr.rgb, tr.alpha
+
+
+def trace_ray_np(
+    texture: AnisoTexture,
+    origin,
+    direction,
+    lighting: Lighting,
+    t_range: tuple[float, float] = (0.0, np.inf),
+    density: str = "facet",
+    normal: str = "mean",
+    opacity: str = "exponential",
+) -> RayTrace:
+    """:func:`march_ray_np` with what the ray met (see :class:`RayTrace`)."""
+    _check_choice(density, DENSITY_MODES, "density reading")
+    _check_choice(normal, NORMAL_MODES, "normal")
+    _check_choice(opacity, OPACITY_MODES, "opacity law")
+    d = np.asarray(direction, dtype=np.float64)
+    if d.shape != (3,) or not np.isfinite(d).all() or not np.linalg.norm(d) > 0:
+        raise InputError(f"ray direction must be a finite non-zero 3-vector, got {direction!r}")
+    d = d / np.linalg.norm(d)
+    d = np.where(np.abs(d) < 1e-12, 0.0, d)
+    h = float(texture.voxel_size)
+    o = (np.asarray(origin, dtype=np.float64) - np.asarray(texture.origin, np.float64)) / h
+    shape = np.asarray(texture.shape, dtype=np.int64)
+    t0, t1 = float(t_range[0]) / h, float(t_range[1]) / h
+    out = RayTrace()
+    for a in range(3):
+        if d[a] == 0.0:
+            if o[a] < 0.0 or o[a] > shape[a]:
+                t1 = -np.inf
+        else:
+            ta, tb = (0.0 - o[a]) / d[a], (shape[a] - o[a]) / d[a]
+            t0, t1 = max(t0, min(ta, tb)), min(t1, max(ta, tb))
+    bg = np.asarray(lighting.background, dtype=np.float64)
+    if not t0 < t1 or texture.n_voxels == 0:
+        out.rgb = bg.copy()
+        return out
+
+    # Occupied cells by key; coords are sorted, so their keys are too.
+    sy, sz = int(shape[1]), int(shape[2])
+    coords = np.asarray(texture.coords, dtype=np.int64)
+    keys = (coords[:, 0] * sy + coords[:, 1]) * sz + coords[:, 2]
+
+    cell = np.clip(np.floor(o + d * t0).astype(np.int64), 0, shape - 1)
+    step = np.sign(d).astype(np.int64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tmax = np.where(d > 0, (cell + 1 - o) / d, np.where(d < 0, (cell - o) / d, _BIG))
+        tdelta = np.where(d != 0, 1.0 / np.abs(d), _BIG)
+    t = t0
+    hits: list[tuple[int, float, float]] = []
+    while t < t1:
+        tx = float(tmax.min())
+        te = min(tx, t1)
+        if te > t:
+            key = (cell[0] * sy + cell[1]) * sz + cell[2]
+            i = int(np.searchsorted(keys, key))
+            if i < len(keys) and keys[i] == key:
+                hits.append((i, t, te - t))
+            t = te
+        if tx >= t1:
+            break
+        a = int(np.argmin(tmax))  # first minimum: x, then y, then z, as on the GPU
+        cell[a] += step[a]
+        tmax[a] += tdelta[a]
+        if not 0 <= cell[a] < shape[a]:
+            break
+
+    P = float(np.abs(d).sum())
+    vox = np.array([hv[0] for hv in hits], dtype=np.int64)
+    dens = density_along(texture, d, density, vox) if len(vox) else np.zeros(0)
+    cols = voxel_colors(texture, d, lighting, normal, vox) if len(vox) else np.zeros((0, 3))
+    C, T = np.zeros(3), 1.0
+    for (v, ti, chord), D, col in zip(hits, dens, cols, strict=True):
+        if T <= T_MIN:
+            break
+        if opacity == "exponential":
+            alpha = min(max(D / P, 0.0), ALPHA_MAX)
+            sigma = -np.log1p(-alpha) * P
+            seg = -T * np.expm1(-sigma * chord)
+        else:
+            sigma = min(max(D, 0.0), P)
+            seg = min(T, sigma * chord)
+        if not seg > 0.0:
+            continue
+        out.voxels.append(v)
+        out.t_enter.append(ti * h)
+        out.chords.append(chord * h)
+        if out.t50 is None and T - seg <= 0.5:
+            dt = 0.0
+            if T > 0.5:
+                dt = np.log(T / 0.5) / sigma if opacity == "exponential" else (T - 0.5) / sigma
+            out.t50 = (ti + dt) * h
+        C += seg * col
+        T -= seg
+    out.rgb = np.clip(C + T * bg, 0.0, 1.0)
+    out.alpha = float(np.clip(1.0 - T, 0.0, 1.0))
+    return out
+
+
+# --------------------------------------------------------------- GPU layout
+
+
+def pack_volume(texture: AnisoTexture) -> dict[str, np.ndarray]:
+    """The arrays volume.frag reads, in upload order (see its header): the
+    two-level index (``top``, ``pool``), ``offsets``, ``density`` (float16
+    pairs in uint32), ``entries`` (8 uint32 per entry) and ``directions``.
+    CPU only; checks the texture holds finite numbers."""
+    if not isinstance(texture, AnisoTexture):
+        raise InputError(f"the volume renderer draws an AnisoTexture, got {type(texture).__name__}")
+    for name in (
+        "density",
+        "entry_area",
+        "entry_normal",
+        "entry_kd",
+        "entry_ks",
+        "entry_shininess",
+    ):
+        if not np.isfinite(np.asarray(getattr(texture, name))).all():
+            raise InputError(
+                f"texture field '{name}' holds NaN or infinite values; rebuild the texture"
+            )
+    if np.any(np.asarray(texture.density) < 0) or np.any(np.asarray(texture.entry_area) < 0):
+        raise InputError("texture has negative density or area; rebuild the texture")
+    shape = np.asarray(texture.shape, dtype=np.int64)
+    bricks = -(-shape // BRICK)
+    M, K = texture.n_voxels, texture.n_directions
+    coords = np.asarray(texture.coords, dtype=np.int64)
+    if M and (np.any(coords < 0) or np.any(coords >= shape)):
+        raise InputError("texture coords lie outside its grid shape; the texture is damaged")
+
+    bc = coords // BRICK
+    bkey = (bc[:, 2] * bricks[1] + bc[:, 1]) * bricks[0] + bc[:, 0]
+    ukeys, brick_of = np.unique(bkey, return_inverse=True)
+    top = np.full(int(np.prod(bricks)), -1, dtype=np.int32)
+    top[ukeys] = np.arange(len(ukeys), dtype=np.int32)
+    lc = coords - bc * BRICK
+    pool = np.full(len(ukeys) * BRICK**3, -1, dtype=np.int32)
+    pool[brick_of * BRICK**3 + (lc[:, 2] * BRICK + lc[:, 1]) * BRICK + lc[:, 0]] = np.arange(
+        M, dtype=np.int32
+    )
+
+    offsets = np.asarray(texture.entry_offsets, dtype=np.uint32)
+    # float16 ends at 65504; a voxel saturates long before (D > P <= sqrt 3),
+    # and an infinity times a zero weight would be NaN on the GPU.
+    dens16 = np.minimum(np.asarray(texture.density), 6e4).astype(np.float16).ravel()
+    if len(dens16) % 2:
+        dens16 = np.append(dens16, np.float16(0))
+    density = dens16.view(np.uint32)
+
+    E = texture.n_entries
+    entries = np.zeros((E, 8), dtype=np.uint32)
+    entries[:, 0:3] = np.asarray(texture.entry_normal, dtype=np.float32).view(np.uint32)
+    entries[:, 3] = np.asarray(texture.entry_area, dtype=np.float32).view(np.uint32)
+    half = np.zeros((E, 4), dtype=np.float16)
+    half[:, 0:3] = np.clip(texture.entry_kd, 0.0, 6e4)
+    half[:, 3] = np.clip(texture.entry_ks, 0.0, 6e4)
+    entries[:, 4:6] = half.view(np.uint32)
+    entries[:, 6] = np.asarray(texture.entry_shininess, dtype=np.float32).view(np.uint32)
+    entries[:, 7] = np.asarray(texture.entry_direction, dtype=np.uint32)
+
+    directions = np.zeros((K, 4), dtype=np.float32)
+    directions[:, :3] = texture.directions
+    return {"top": top, "pool": pool, "offsets": offsets, "density": density,
+            "entries": entries, "directions": directions}  # fmt: skip
+
+
+@dataclass(eq=False)
+class GPUVolume:
+    """A texture uploaded once: six shader storage buffers (bindings 0-5, in
+    the order of :func:`pack_volume`) and the grid's geometry. ``origin`` is
+    the grid centre, the local frame of the depth matrix."""
+
+    buffers: dict[str, moderngl.Buffer]
+    origin: np.ndarray
+    bounds: np.ndarray
+    grid_origin: np.ndarray
+    voxel_size: float
+    shape: np.ndarray
+    bricks: np.ndarray
+    n_directions: int
+    n_voxels: int
+    sizes: dict[str, int]
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes uploaded to the GPU."""
+        return int(sum(self.sizes.values()))
+
+
+class VolumeRenderer:
+    """Ray-marches an :class:`~aniso3d.texture.AnisoTexture` (one ray per pixel)."""
+
+    method = "volume"
+
+    def __init__(self, gl: GLContext):
+        self.gl = gl
+        ctx = gl._check()
+        if ctx.version_code < REQUIRE_GL:
+            raise ResourceError(
+                f"the volume renderer needs OpenGL {REQUIRE_GL // 100}.{REQUIRE_GL % 100 // 10} "
+                f"(shader storage buffers); this context is {gl.version}"
+            )
+        self.max_block = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE", 1 << 27))
+        defines = {
+            "BRICK": BRICK,
+            "ALPHA_MAX": float(np.float32(ALPHA_MAX)),
+            "T_MIN": T_MIN,
+            "BIG": _BIG,
+        }
+        self.prog = gl.program("volume.vert", "volume.frag", defines=defines)
+        self.vao = gl.track(ctx.vertex_array(self.prog, []))
+
+    def upload(self, texture: AnisoTexture) -> GPUVolume:
+        arrays = pack_volume(texture)
+        for name, arr in arrays.items():
+            if arr.nbytes > self.max_block:
+                raise ResourceError(
+                    f"the volume's '{name}' buffer needs {arr.nbytes / 2**20:.0f} MiB, above this "
+                    f"OpenGL's {self.max_block / 2**20:.0f} MiB per shader storage buffer "
+                    f"(texture: {texture.n_voxels} voxels, {texture.n_directions} directions, "
+                    f"grid {tuple(int(s) for s in texture.shape)}); "
+                    "lower --resolution or --directions"
+                )
+        ctx = self.gl.ctx
+        buffers: dict[str, moderngl.Buffer] = {}
+        try:
+            for name, arr in arrays.items():
+                # An empty buffer cannot be made; 16 bytes of -1/0 read as "nothing".
+                data = arr.tobytes() if arr.nbytes else np.full(4, -1, np.int32).tobytes()
+                buffers[name] = self.gl.track(ctx.buffer(data))
+        except moderngl.Error as exc:
+            self.gl.free(*buffers.values())
+            raise ResourceError(
+                f"uploading the volume failed (out of GPU memory?): {exc}"
+            ) from None
+        bounds = texture.bounds
+        shape = np.asarray(texture.shape, dtype=np.int64)
+        return GPUVolume(
+            buffers=buffers,
+            origin=0.5 * (bounds[0] + bounds[1]),
+            bounds=bounds,
+            grid_origin=np.asarray(texture.origin, dtype=np.float64),
+            voxel_size=float(texture.voxel_size),
+            shape=shape,
+            bricks=-(-shape // BRICK),
+            n_directions=texture.n_directions,
+            n_voxels=texture.n_voxels,
+            sizes={name: int(arr.nbytes) for name, arr in arrays.items()},
+        )
+
+    def draw(
+        self,
+        handle: GPUVolume,
+        view: FrameView,
+        fbo=None,
+        step: str = "dda",
+        density: str = "facet",
+        normal: str = "mean",
+        opacity: str = "exponential",
+        **unknown,
+    ) -> None:
+        """Draw into the bound framebuffer (cleared to the background, alpha 0).
+
+        Options: ``step`` "dda" (exact voxel chords; the only stepping),
+        ``density`` "facet" | "kernel" | "nearest" (how the density sphere is
+        read), ``normal`` "mean" | "sample" (the shading normal of an entry),
+        ``opacity`` "exponential" | "linear" (how coverage adds up along the
+        ray; see the module docstring).
+        """
+        if unknown:
+            raise InputError(
+                f"unknown volume option(s) {sorted(unknown)}; known: step, density, normal, opacity"
+            )
+        _check_choice(step, STEPS, "volume step")
+        _check_choice(density, DENSITY_MODES, "density reading")
+        _check_choice(normal, NORMAL_MODES, "normal")
+        _check_choice(opacity, OPACITY_MODES, "opacity law")
+        cam = view.camera
+        right, up, forward = cam.basis()
+        t = float(np.tan(np.radians(cam.fov) / 2))
+        h = handle.voxel_size
+        eye_g = (np.asarray(cam.position, dtype=np.float64) - handle.grid_origin) / h
+        GLContext.set_uniforms(
+            self.prog,
+            {
+                "u_size": (float(view.size[0]), float(view.size[1])),
+                "u_forward": tuple(map(float, forward)),
+                "u_right": tuple(map(float, right)),
+                "u_up": tuple(map(float, up)),
+                "u_tan": (t * view.aspect, t),
+                "u_eye_g": tuple(map(float, eye_g)),
+                "u_h": h,
+                "u_near": float(view.near),
+                "u_far": float(view.far),
+                "u_shape": tuple(int(s) for s in handle.shape),
+                "u_bricks": tuple(int(s) for s in handle.bricks),
+                "u_center_g": tuple(float(s) / 2 for s in handle.shape),
+                "u_mvp": view.mvp(handle.origin),
+                "u_num_dirs": int(handle.n_directions),
+                "u_density_mode": DENSITY_MODES.index(density),
+                "u_normal_mode": NORMAL_MODES.index(normal),
+                "u_opacity_mode": OPACITY_MODES.index(opacity),
+                "u_background": tuple(float(c) for c in view.lighting.background),
+            },
+        )
+        GLContext.set_uniforms(self.prog, view.lighting.uniforms(), strict=False)
+        for binding, buf in enumerate(handle.buffers.values()):
+            buf.bind_to_storage_buffer(binding)
+        ctx = self.gl.ctx
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
+        # A pixel that never reaches alpha 0.5 writes depth 1.0, the clear value.
+        ctx.depth_func = "<="
+        try:
+            self.vao.render(moderngl.TRIANGLES, vertices=3)
+        finally:
+            ctx.depth_func = "<"
+
+    def release(self, handle: GPUVolume) -> None:
+        self.gl.free(*handle.buffers.values())
+        handle.buffers.clear()
+
+    def release_all(self) -> None:
+        """Free the renderer's own GPU objects (the programs stay cached in the context)."""
+        self.gl.free(self.vao)
+        self.vao = None
+
+
+def _check_choice(value, choices: tuple[str, ...], what: str) -> None:
+    if value not in choices:
+        raise InputError(f"unknown {what} {value!r}; choose one of {', '.join(choices)}")

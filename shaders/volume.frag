@@ -1,0 +1,285 @@
+#version 430
+// Volume renderer (b), fragment stage: one ray per pixel through the sparse
+// anisotropic texture, exact voxel chords by a two-level 3D DDA
+// (Amanatides-Woo over 8^3 bricks, then over the voxels of occupied bricks).
+//
+// In (uniforms): camera basis u_forward/u_right/u_up (world, unit) with
+// u_tan = (tan(fov/2) * aspect, tan(fov/2)); u_size framebuffer pixels;
+// u_eye_g eye in grid coordinates (voxel units, grid minimum corner at 0);
+// u_h voxel edge (world); u_near/u_far clip distances along u_forward (world);
+// u_shape grid cells, u_bricks brick cells; u_center_g grid centre (grid
+// coords); u_mvp clip <- local (local = world - grid centre) for depth;
+// u_num_dirs K; u_density_mode 0 facet / 1 kernel / 2 nearest; u_normal_mode
+// 0 mean / 1 sample; u_opacity_mode 0 exponential / 1 linear; u_background
+// RGB; the lighting uniforms of lighting.glsl.
+// In (SSBOs, laid out by aniso3d/render_volume.py:pack_volume):
+//   0 top[]      int, brick id of each brick cell or -1 (x fastest)
+//   1 pool[]     int, voxel index of each cell of each brick or -1
+//   2 offs[]     uint, CSR offsets of each voxel's shading entries (M + 1)
+//   3 dens[]     uint, density sphere D_v(N_p) (M x K) as float16 pairs
+//   4 ent[]      uvec4 x 2 per entry: (mean normal xyz, area) as float bits;
+//                (half2(kd.rg), half2(kd.b, ks), shininess bits, sample index)
+//   5 dirs[]     vec4, the K sample directions N_p (xyz)
+// Out: f_color = (C + T * background, 1 - T), C the premultiplied colour and
+// T the transmittance left; gl_FragDepth where 1 - T first reaches 0.5 (1.0
+// if it never does). Rays that miss the grid are discarded.
+#include "lighting.glsl"
+
+// Injected by render_volume.py: BRICK (brick edge in voxels), ALPHA_MAX
+// (coverage cap below 1 so the optical depth stays finite), T_MIN (early
+// termination), BIG (stands for an infinite ray parameter).
+
+uniform vec2 u_size;
+uniform vec3 u_forward;
+uniform vec3 u_right;
+uniform vec3 u_up;
+uniform vec2 u_tan;
+uniform vec3 u_eye_g;
+uniform float u_h;
+uniform float u_near;
+uniform float u_far;
+uniform ivec3 u_shape;
+uniform ivec3 u_bricks;
+uniform vec3 u_center_g;
+uniform mat4 u_mvp;
+uniform int u_num_dirs;
+uniform int u_density_mode;
+uniform int u_normal_mode;
+uniform int u_opacity_mode;
+uniform vec3 u_background;
+
+layout(std430, binding = 0) readonly buffer TopIndex { int top[]; };
+layout(std430, binding = 1) readonly buffer BrickPool { int pool[]; };
+layout(std430, binding = 2) readonly buffer Offsets { uint offs[]; };
+layout(std430, binding = 3) readonly buffer Density { uint dens[]; };
+layout(std430, binding = 4) readonly buffer Entries { uvec4 ent[]; };
+layout(std430, binding = 5) readonly buffer Directions { vec4 dirs[]; };
+
+out vec4 f_color;
+
+// Per-ray state shared by the helpers below.
+vec3 g_d;          // unit ray direction (world = grid axes)
+float g_p;         // P(w) = |wx| + |wy| + |wz|
+ivec4 g_nb;        // the 4 density samples nearest +-w
+vec4 g_nbw;        // their interpolation weights (sum 1)
+mat4x3 g_nbdir;    // their directions, as columns
+vec3 g_color;      // premultiplied colour so far
+float g_trans;     // transmittance so far
+float g_t50;       // ray parameter (grid units) where 1 - T reached 0.5, or -1
+
+float density_at(int v, int p) {
+    int i = v * u_num_dirs + p;
+    vec2 pair = unpackHalf2x16(dens[i >> 1]);
+    return (i & 1) == 0 ? pair.x : pair.y;
+}
+
+// The 4 samples nearest the line of w (density is even: D(w) = D(-w), so a
+// sample N_p also stands at -N_p) and Franke-Little weights
+// ((R - a) / (R a))^2 with R the angle of the 5th nearest: continuous in w,
+// and exact (weight 1) at a sample direction. Mirrors direction_weights().
+void neighbours(vec3 w) {
+    float bd[5] = float[5](-1.0, -1.0, -1.0, -1.0, -1.0);
+    int bi[5] = int[5](0, 0, 0, 0, 0);
+    for (int p = 0; p < u_num_dirs; ++p) {
+        float c = abs(dot(dirs[p].xyz, w));
+        if (c > bd[4]) {
+            int j = 4;
+            while (j > 0 && c > bd[j - 1]) {
+                bd[j] = bd[j - 1];
+                bi[j] = bi[j - 1];
+                --j;
+            }
+            bd[j] = c;
+            bi[j] = p;
+        }
+    }
+    int k = min(4, u_num_dirs);
+    float radius = u_num_dirs > 4 ? acos(clamp(bd[4], 0.0, 1.0)) : 2.0;
+    vec4 wt = vec4(0.0);
+    float a0 = acos(clamp(bd[0], 0.0, 1.0));
+    for (int j = 0; j < 4; ++j) {
+        g_nb[j] = bi[j];
+        g_nbdir[j] = dirs[bi[j]].xyz;
+        if (j < k) {
+            float a = max(acos(clamp(bd[j], 0.0, 1.0)), 1e-6);
+            wt[j] = a < radius ? pow((radius - a) / (radius * a), 2.0) : 0.0;
+        }
+    }
+    float s = wt.x + wt.y + wt.z + wt.w;
+    // At a sample direction, or when the 5 nearest tie, the nearest alone.
+    g_nbw = (a0 <= 1e-6 || !(s > 0.0) || isinf(s)) ? vec4(1.0, 0.0, 0.0, 0.0) : wt / s;
+    if (u_density_mode == 2) g_nbw = vec4(1.0, 0.0, 0.0, 0.0);
+}
+
+// Add voxel v, crossed over ray parameters [t0, t0 + chord] (grid units).
+void composite(int v, float t0, float chord) {
+    uint e0 = offs[v];
+    uint e1 = offs[v + 1];
+    float base_w = 0.0;        // sum A |n . w|: the facets' own projected area
+    vec4 base_nb = vec4(0.0);  // the same at the 4 neighbour samples
+    vec3 col_w = vec3(0.0);
+    float sum_w = 0.0;
+    vec3 col_a = vec3(0.0);
+    float sum_a = 0.0;
+    vec3 view = -g_d;
+    for (uint e = e0; e < e1; ++e) {
+        uvec4 a = ent[2u * e];
+        uvec4 b = ent[2u * e + 1u];
+        vec3 n = uintBitsToFloat(a.xyz);
+        float area = uintBitsToFloat(a.w);
+        vec2 kd_rg = unpackHalf2x16(b.x);
+        vec2 kd_b_ks = unpackHalf2x16(b.y);
+        float shininess = uintBitsToFloat(b.z);
+        base_w += area * abs(dot(n, g_d));
+        base_nb += area * abs(n * g_nbdir);
+        vec3 ns = u_normal_mode == 0 ? n : dirs[b.w].xyz;
+        float wgt = area * abs(dot(ns, g_d));
+        vec3 c = clamp(shade(ns, view, vec3(kd_rg, kd_b_ks.x), kd_b_ks.y, shininess), 0.0, 1.0);
+        col_w += wgt * c;
+        sum_w += wgt;
+        col_a += area * c;
+        sum_a += area;
+    }
+    vec4 dn = vec4(density_at(v, g_nb.x), density_at(v, g_nb.y), density_at(v, g_nb.z),
+                   density_at(v, g_nb.w));
+    float density;
+    if (u_density_mode == 0) {
+        // The facets' projected area, corrected by the density sphere's
+        // residual interpolated from the neighbour samples.
+        density = base_w + dot(g_nbw, dn - base_nb);
+    } else {
+        density = dot(g_nbw, dn);
+    }
+    // Per unit length (grid units) both laws have optical depth sigma, and
+    // the mean chord 1/P gives coverage min(1, D/P).
+    float sigma, seg;
+    if (u_opacity_mode == 0) {
+        // exponential (Beer-Lambert): facets at independent random places.
+        float alpha = clamp(density / g_p, 0.0, ALPHA_MAX);
+        sigma = -log(1.0 - alpha) * g_p;
+        seg = g_trans * (1.0 - exp(-sigma * chord));
+    } else {
+        // linear: coverage adds up along the ray and saturates at 1.
+        sigma = min(max(density, 0.0), g_p);
+        seg = min(g_trans, sigma * chord);
+    }
+    if (!(seg > 0.0)) return;
+    vec3 color = sum_w > 1e-7 * sum_a ? col_w / sum_w : (sum_a > 0.0 ? col_a / sum_a : vec3(0.0));
+    float t_after = g_trans - seg;
+    if (g_t50 < 0.0 && t_after <= 0.5) {
+        float dt = 0.0;
+        if (g_trans > 0.5) {
+            dt = u_opacity_mode == 0 ? log(g_trans / 0.5) / sigma : (g_trans - 0.5) / sigma;
+        }
+        g_t50 = t0 + dt;
+    }
+    g_color += seg * color;
+    g_trans = t_after;
+}
+
+// Amanatides-Woo set-up for cells of edge `size` inside [lo, hi) at ray
+// parameter t. Zero direction components never step (no division by zero).
+void dda_init(vec3 o, float t, float size, ivec3 lo, ivec3 hi,
+              out ivec3 cell, out ivec3 stp, out vec3 tmax, out vec3 tdelta) {
+    vec3 p = (o + g_d * t) / size;
+    cell = clamp(ivec3(floor(p)), lo, hi - 1);
+    for (int a = 0; a < 3; ++a) {
+        float da = g_d[a];
+        if (da > 0.0) {
+            stp[a] = 1;
+            tmax[a] = (float(cell[a] + 1) * size - o[a]) / da;
+            tdelta[a] = size / da;
+        } else if (da < 0.0) {
+            stp[a] = -1;
+            tmax[a] = (float(cell[a]) * size - o[a]) / da;
+            tdelta[a] = -size / da;
+        } else {
+            stp[a] = 0;
+            tmax[a] = BIG;
+            tdelta[a] = BIG;
+        }
+    }
+}
+
+int min_axis(vec3 tm) {
+    return (tm.x <= tm.y && tm.x <= tm.z) ? 0 : (tm.y <= tm.z ? 1 : 2);
+}
+
+void main() {
+    vec2 ndc = gl_FragCoord.xy / u_size * 2.0 - 1.0;
+    g_d = normalize(u_forward + ndc.x * u_tan.x * u_right + ndc.y * u_tan.y * u_up);
+    // Axis components this small cross no cell boundary inside any grid.
+    g_d = mix(g_d, vec3(0.0), lessThan(abs(g_d), vec3(1e-12)));
+    g_p = abs(g_d.x) + abs(g_d.y) + abs(g_d.z);
+    vec3 o = u_eye_g;
+
+    // Ray parameter range (grid units): the grid's box, then near/far.
+    float cos_f = dot(g_d, u_forward);
+    float t0 = u_near / (u_h * cos_f);
+    float t1 = u_far / (u_h * cos_f);
+    vec3 hi = vec3(u_shape);
+    for (int a = 0; a < 3; ++a) {
+        if (g_d[a] == 0.0) {
+            if (o[a] < 0.0 || o[a] > hi[a]) discard;
+        } else {
+            float ta = (0.0 - o[a]) / g_d[a];
+            float tb = (hi[a] - o[a]) / g_d[a];
+            t0 = max(t0, min(ta, tb));
+            t1 = min(t1, max(ta, tb));
+        }
+    }
+    if (!(t0 < t1)) discard;
+
+    neighbours(g_d);
+    g_color = vec3(0.0);
+    g_trans = 1.0;
+    g_t50 = -1.0;
+
+    ivec3 bcell, bstep, cell, stp;
+    vec3 btmax, btdelta, tmax, tdelta;
+    dda_init(o, t0, float(BRICK), ivec3(0), u_bricks, bcell, bstep, btmax, btdelta);
+    float t = t0;
+    int outer_max = u_bricks.x + u_bricks.y + u_bricks.z + 3;
+    for (int it = 0; it < outer_max && g_trans > T_MIN; ++it) {
+        float tb_exit = min(min(btmax.x, btmax.y), btmax.z);
+        float tb_end = min(tb_exit, t1);
+        int bid = top[(bcell.z * u_bricks.y + bcell.y) * u_bricks.x + bcell.x];
+        if (bid >= 0 && tb_end > t) {
+            ivec3 lo = bcell * BRICK;
+            ivec3 vhi = min(lo + BRICK, u_shape);
+            dda_init(o, t, 1.0, lo, vhi, cell, stp, tmax, tdelta);
+            float ti = t;
+            for (int jt = 0; jt < 3 * BRICK + 3 && g_trans > T_MIN; ++jt) {
+                float tx = min(min(tmax.x, tmax.y), tmax.z);
+                float te = min(tx, tb_end);
+                if (te > ti) {
+                    ivec3 lc = cell - lo;
+                    int v = pool[bid * BRICK * BRICK * BRICK + (lc.z * BRICK + lc.y) * BRICK + lc.x];
+                    if (v >= 0) composite(v, ti, te - ti);
+                    ti = te;
+                }
+                if (tx >= tb_end) break;
+                int a = min_axis(tmax);
+                cell[a] += stp[a];
+                tmax[a] += tdelta[a];
+                if (cell[a] < lo[a] || cell[a] >= vhi[a]) break;
+            }
+        }
+        t = max(t, tb_end);
+        if (tb_exit >= t1) break;
+        int a = min_axis(btmax);
+        bcell[a] += bstep[a];
+        btmax[a] += btdelta[a];
+        if (bcell[a] < 0 || bcell[a] >= u_bricks[a]) break;
+    }
+
+    vec3 rgb = clamp(g_color + g_trans * u_background, 0.0, 1.0);
+    f_color = vec4(rgb, clamp(1.0 - g_trans, 0.0, 1.0));
+    float depth = 1.0;
+    if (g_t50 >= 0.0) {
+        vec3 p_local = (o + g_d * g_t50 - u_center_g) * u_h;
+        vec4 clip = u_mvp * vec4(p_local, 1.0);
+        depth = clamp(clip.z / clip.w * 0.5 + 0.5, 0.0, 1.0);
+    }
+    gl_FragDepth = depth;
+}
