@@ -135,6 +135,7 @@ def _fmt_bytes(n: float) -> str:
 
 
 def cmd_build(args) -> int:
+    from .errors import ResourceError
     from .mesh import Mesh
     from .texture import build_texture
     from .util import refuse_overwriting_input
@@ -143,6 +144,11 @@ def cmd_build(args) -> int:
     if out.suffix.lower() not in (TEXTURE_SUFFIX, ".ply"):
         raise InputError(f"output '{out}' must end in {TEXTURE_SUFFIX} (texture) or .ply (points)")
     refuse_overwriting_input(out, args.mesh)
+    # Check where the output goes before a long build, not after it.
+    if out.is_dir():
+        raise InputError(f"output '{out}' is a directory; name a file to write")
+    if not out.parent.is_dir():
+        raise InputError(f"output folder '{out.parent}' does not exist; create it first")
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     mesh = load_input(args.mesh)
@@ -163,10 +169,13 @@ def cmd_build(args) -> int:
     points = tex.to_points(placement=args.placement, per_entry=args.points_per_entry)
     timings["points"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    if out.suffix.lower() == ".ply":
-        points.save_ply(out)
-    else:
-        tex.save(out)
+    try:
+        if out.suffix.lower() == ".ply":
+            points.save_ply(out)
+        else:
+            tex.save(out)
+    except OSError as exc:  # disk full, permissions: one line, not a traceback
+        raise ResourceError(f"could not write '{out}': {exc.strerror or exc}") from None
     timings["save"] = time.perf_counter() - t0
     rows = [
         ("mesh", mesh.name),
@@ -191,8 +200,17 @@ def cmd_build(args) -> int:
 # ------------------------------------------------------------------------- main
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a bad option is one line on stderr (status 2), like every
+    other error, instead of the usage block followed by the message."""
+
+    def error(self, message: str):
+        hint = "; see 'aniso3d --help' for the commands" if self.prog == "aniso3d" else ""
+        self.exit(2, f"{self.prog}: error: {message}{hint}\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="aniso3d",
         description="Render finely structured 3D objects via an anisotropic 3D texture and point splats.",
     )
@@ -232,23 +250,40 @@ def _extra_commands():
     return found
 
 
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, turned into an exception so that a run killed by ``kill`` or a
+    job scheduler unwinds like Ctrl-C: no temporary file left behind."""
+
+
+def _on_sigterm(signum, frame):
+    raise _Terminated
+
+
 def main(argv: list[str] | None = None) -> int:
+    import signal
+    import threading
+
     parser = build_parser()
     args = parser.parse_args(argv)
+    in_main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _on_sigterm) if in_main else None
     try:
         return int(args.func(args) or 0)
     except Aniso3DError as exc:
         print(f"aniso3d {args.command}: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         print(f"aniso3d {args.command}: interrupted; no output was written", file=sys.stderr)
-        return 130
+        return 128 + signal.SIGTERM if isinstance(exc, _Terminated) else 130
     except MemoryError:
         print(
             f"aniso3d {args.command}: error: out of memory; lower --resolution or --directions",
             file=sys.stderr,
         )
         return 2
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

@@ -141,24 +141,46 @@ def _clip_halfspace(
     return out, keep.sum(axis=1)
 
 
+def _plane(k: np.ndarray, base: np.ndarray) -> np.ndarray:
+    """Grid plane k in coordinates local to ``base``. Every use goes through
+    here so that slab decisions and cuts see bit-identical plane values."""
+    return k.astype(np.float64) - base
+
+
 def _split_axis(
     poly: np.ndarray,
     count: np.ndarray,
     face: np.ndarray,
     cell: np.ndarray,
+    shift: np.ndarray,
     axis: int,
     n_cells: int,
 ):
-    """Cut every polygon into the slabs [k, k+1) along ``axis`` it overlaps."""
+    """Cut every polygon into the slabs [k, k+1) along ``axis`` it overlaps.
+
+    Polygon coordinates are local: grid coordinates minus the polygon's
+    ``shift`` (its triangle's first vertex), so plane k is at ``_plane(k,
+    shift)``. Slabs are decided against exactly the plane values the cuts use.
+    """
     V = poly.shape[1]
     valid = np.arange(V)[None, :] < count[:, None]
     x = poly[:, :, axis]
+    base = shift[:, axis]
     xmin = np.where(valid, x, np.inf).min(axis=1)
     xmax = np.where(valid, x, -np.inf).max(axis=1)
-    k0 = np.clip(np.floor(xmin), 0, n_cells - 1).astype(np.int64)
-    # ceil - 1: a polygon ending exactly on plane k does not enter slab k;
-    # max with k0: one lying in plane k stays in slab k.
-    k1 = np.maximum(k0, np.clip(np.ceil(xmax) - 1, 0, n_cells - 1).astype(np.int64))
+    # k0: the slab holding xmin, P(k0) <= xmin < P(k0 + 1). The estimate from
+    # absolute coordinates is off by at most one; fix it against P itself.
+    k0 = np.floor(xmin + base).astype(np.int64)
+    k0 -= xmin < _plane(k0, base)
+    k0 += xmin >= _plane(k0 + 1, base)
+    k0 = np.clip(k0, 0, n_cells - 1)
+    # k1: the last plane strictly below xmax, P(k1) < xmax <= P(k1 + 1): a
+    # polygon ending exactly on plane k does not enter slab k; max with k0:
+    # one lying in plane k stays in slab k.
+    k1 = np.ceil(xmax + base).astype(np.int64) - 1
+    k1 -= xmax <= _plane(k1, base)
+    k1 += xmax > _plane(k1 + 1, base)
+    k1 = np.maximum(k0, np.clip(k1, 0, n_cells - 1))
     span = k1 - k0 + 1
 
     single = span == 1
@@ -170,6 +192,7 @@ def _split_axis(
     outs_count = [count[single]]
     outs_face = [face[single]]
     outs_cell = [cell_single]
+    outs_shift = [shift[single]]
 
     multi = np.nonzero(~single)[0]
     if len(multi):
@@ -178,6 +201,7 @@ def _split_axis(
         first = np.repeat(np.cumsum(reps) - reps, reps)
         k = k0[src] + (np.arange(len(src)) - first)
         p, c = poly[src], count[src]
+        b = base[src]
         # A piece in the polygon's first slab lies above its lower plane already,
         # and one in its last slab below its upper plane: clip only what can cut.
         # The outermost slabs are unbounded, so nothing on or beyond the grid's
@@ -190,7 +214,7 @@ def _split_axis(
             if len(idx):
                 # Each cut adds at most one vertex; p has room for two.
                 p[idx], c[idx] = _clip_halfspace(
-                    p[idx, :-1], c[idx], axis, plane[idx].astype(np.float64), above
+                    p[idx, :-1], c[idx], axis, _plane(plane[idx], b[idx]), above
                 )
         ok = c >= 3
         new_cell = cell[src[ok]].copy()
@@ -199,11 +223,13 @@ def _split_axis(
         outs_count.append(c[ok])
         outs_face.append(face[src[ok]])
         outs_cell.append(new_cell)
+        outs_shift.append(shift[src[ok]])
     return (
         np.concatenate(outs_poly),
         np.concatenate(outs_count),
         np.concatenate(outs_face),
         np.concatenate(outs_cell),
+        np.concatenate(outs_shift),
     )
 
 
@@ -225,20 +251,44 @@ def _polygon_area_centroid(poly: np.ndarray, count: np.ndarray, normal: np.ndarr
 
 
 def clip_to_grid(
-    tri_grid: np.ndarray, normals: np.ndarray, shape: np.ndarray, face_index: np.ndarray
+    tri_grid: np.ndarray,
+    normals: np.ndarray,
+    shape: np.ndarray,
+    face_index: np.ndarray,
+    first: np.ndarray | None = None,
 ) -> SubPolygons:
     """Clip triangles (n, 3, 3), given in grid coordinates, into grid cells.
 
     ``normals`` are the triangles' unit normals (zero for degenerate ones, which
     are dropped); ``face_index`` labels each triangle in the output.
+
+    With ``first`` (n, 3), ``tri_grid`` instead holds each triangle relative to
+    its first vertex (``(x - x0) / h``) and ``first`` that vertex's grid
+    coordinates: tiny triangles far from the grid origin then keep their shape
+    exactly, which converting every vertex to grid coordinates would not.
     """
     keep = np.any(normals != 0, axis=1)
     local = np.nonzero(keep)[0]
-    poly = tri_grid[local]
+    # Clip each triangle in coordinates relative to its first vertex: cut
+    # points then carry rounding errors relative to the triangle's size, not
+    # to its position in the grid, so even triangles far smaller than a voxel
+    # keep their area to ~1e-15 relative. (Pieces of a triangle always tile
+    # it, whatever rounding does to a plane's local position; a vertex lying
+    # exactly on a plane stays exactly on it, as both go through the same
+    # subtraction.)
+    if first is None:
+        shift = tri_grid[local, 0].copy()
+        poly = tri_grid[local] - shift[:, None, :]
+    else:
+        shift = np.asarray(first, dtype=np.float64)[local]
+        poly = np.array(tri_grid[local], dtype=np.float64)
     count = np.full(len(poly), 3, dtype=np.int64)
     cell = np.zeros((len(poly), 3), dtype=np.int64)
     for axis in range(3):
-        poly, count, local, cell = _split_axis(poly, count, local, cell, axis, int(shape[axis]))
+        poly, count, local, cell, shift = _split_axis(
+            poly, count, local, cell, shift, axis, int(shape[axis])
+        )
     area, centroid = _polygon_area_centroid(poly, count, normals[local])
+    centroid = centroid + shift
     ok = area > 0
     return SubPolygons(np.asarray(face_index)[local[ok]], cell[ok], area[ok], centroid[ok])

@@ -60,9 +60,14 @@ class _OSMesaLoader:
         lib.OSMesaGetProcAddress.restype = ctypes.c_void_p
         lib.OSMesaGetProcAddress.argtypes = [ctypes.c_char_p]
         lib.OSMesaDestroyContext.argtypes = [ctypes.c_void_p]
-        attrs = [self.FORMAT, self.RGBA, self.DEPTH_BITS, 24, self.PROFILE, self.CORE_PROFILE,
-                 self.MAJOR, 3, self.MINOR, 3, 0]  # fmt: skip
-        self.ctx = lib.OSMesaCreateContextAttribs((ctypes.c_int * len(attrs))(*attrs), None)
+        # Ask for the newest core profile first: the volume renderer needs 4.3.
+        self.ctx = None
+        for major, minor in ((4, 5), (4, 3), (3, 3)):
+            attrs = [self.FORMAT, self.RGBA, self.DEPTH_BITS, 24, self.PROFILE, self.CORE_PROFILE,
+                     self.MAJOR, major, self.MINOR, minor, 0]  # fmt: skip
+            self.ctx = lib.OSMesaCreateContextAttribs((ctypes.c_int * len(attrs))(*attrs), None)
+            if self.ctx:
+                break
         if not self.ctx:
             raise RuntimeError("OSMesaCreateContextAttribs failed (no core profile 3.3)")
         self.buf = (ctypes.c_ubyte * (size[0] * size[1] * 4))()
@@ -137,6 +142,27 @@ class GLContext:
         )  # fmt: skip
         self._programs: dict[tuple, moderngl.Program] = {}
         self._objects: list[Any] = []
+
+    #: False for a context adopted with :meth:`wrap`: its owner releases it.
+    _owns_ctx = True
+
+    @classmethod
+    def wrap(cls, ctx: moderngl.Context) -> GLContext:
+        """Adopt a context made elsewhere (e.g. a window's). Objects and programs
+        made through the result are tracked and released as usual; the context
+        itself is left to its owner."""
+        if ctx.version_code < REQUIRE:
+            raise ResourceError(f"OpenGL {ctx.version_code} is too old; aniso3d needs {REQUIRE}+")
+        self = cls.__new__(cls)
+        self.ctx, self._loader, self.backend, self._owns_ctx = ctx, None, "external", False
+        info = ctx.info
+        self.renderer = str(info.get("GL_RENDERER", "?"))
+        self.version = str(info.get("GL_VERSION", "?"))
+        self.software = any(s in self.renderer.lower() for s in ("llvmpipe", "softpipe", "swrast"))
+        self.max_texture_size = int(info.get("GL_MAX_TEXTURE_SIZE", 8192))
+        self.max_viewport = tuple(int(x) for x in info.get("GL_MAX_VIEWPORT_DIMS", (8192, 8192)))
+        self._programs, self._objects = {}, []
+        return self
 
     # ------------------------------------------------------------ resources
 
@@ -225,7 +251,8 @@ class GLContext:
         for prog in self._programs.values():
             prog.release()
         self._programs.clear()
-        self.ctx.release()
+        if self._owns_ctx:
+            self.ctx.release()
         self.ctx = None
         if self._loader is not None:
             self._loader.release()

@@ -200,6 +200,12 @@ class AnisoTexture:
         p = int(np.argmax(np.abs(self.directions @ w)))
         return self.density[:, p] / np.abs(w).sum()
 
+    def pyramid(self, max_levels: int | None = None):
+        """All coarser levels by exact aggregation: see :func:`aniso3d.lod.pyramid`."""
+        from .lod import pyramid
+
+        return pyramid(self, max_levels)
+
     # ---------------------------------------------------------------- points
 
     def to_points(
@@ -263,14 +269,17 @@ class AnisoTexture:
             "sha256": digest,
             "meta": _jsonable(self.meta),
         }
-        buf = io.BytesIO()
-        with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_STORED) as zf:
-            zf.writestr("header.json", json.dumps(header, indent=1))
-            for n, a in arrays.items():
-                b = io.BytesIO()
-                np.save(b, a, allow_pickle=False)
-                zf.writestr(n + ".npy", b.getvalue())
-        return atomic_write(path, buf.getvalue())
+
+        def write(fh) -> None:
+            # Streamed into the temporary file: no copy of the texture in
+            # memory (a 1 GiB texture used to need 2 GiB more to be saved).
+            with zipfile.ZipFile(fh, "w", compression=zipfile.ZIP_STORED) as zf:
+                zf.writestr(_member("header.json"), json.dumps(header, indent=1))
+                for n, a in arrays.items():
+                    with zf.open(_member(n + ".npy"), "w", force_zip64=a.nbytes > 2**30) as out:
+                        np.save(out, a, allow_pickle=False)
+
+        return atomic_write(path, write)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> AnisoTexture:
@@ -291,7 +300,8 @@ class AnisoTexture:
             except (ValueError, zipfile.BadZipFile, OSError) as exc:
                 raise FormatError(f"'{p}' has a damaged header: {exc}") from None
             if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:
-                raise FormatError(f"'{p}' is not an aniso3d texture file (format is {header.get('format')!r})")
+                got = header.get("format") if isinstance(header, dict) else type(header).__name__
+                raise FormatError(f"'{p}' is not an aniso3d texture file (format is {got!r})")
             version = header.get("version")
             if not isinstance(version, int) or version > FORMAT_VERSION or version < 1:
                 raise FormatError(
@@ -308,7 +318,23 @@ class AnisoTexture:
                 raise FormatError(f"'{p}' is damaged ({type(exc).__name__}: {exc}); rebuild it") from None
         if _digest(arrays) != header.get("sha256"):
             raise FormatError(f"'{p}' failed its checksum: the file is damaged; rebuild it from its mesh")
-        return cls(voxel_size=float(header["voxel_size"]), meta=header.get("meta", {}), **arrays)
+        voxel_size = header.get("voxel_size")
+        if isinstance(voxel_size, bool) or not isinstance(voxel_size, (int, float)):
+            raise FormatError(f"'{p}' has a damaged header: voxel_size is {voxel_size!r}")
+        meta = header.get("meta", {})
+        if not isinstance(meta, dict):
+            raise FormatError(f"'{p}' has a damaged header: meta is not an object; rebuild it")
+        try:
+            return cls(voxel_size=float(voxel_size), meta=meta, **arrays)
+        except FormatError as exc:
+            raise FormatError(f"'{p}' is damaged: {exc}; rebuild it from its mesh") from None
+
+
+def _member(name: str) -> zipfile.ZipInfo:
+    """A zip entry with a fixed timestamp, so equal textures give equal files."""
+    info = zipfile.ZipInfo(name, date_time=(1980, 1, 1, 0, 0, 0))
+    info.external_attr = 0o600 << 16
+    return info
 
 
 def _digest(arrays: dict[str, np.ndarray]) -> str:
@@ -422,14 +448,21 @@ def build_texture(
 
     # ---- clip, in batches of triangles
     t0 = time.perf_counter()
-    tri = grid.to_grid(mesh.triangles)
+    # Triangles relative to their first vertex, in units of h, plus that
+    # vertex's grid position: keeps tiny triangles exact in shape anywhere.
+    world = mesh.triangles
+    first = grid.to_grid(world[:, 0])
+    tri = (world - world[:, :1]) / grid.voxel_size
     normals, _ = triangle_normals(tri)
     pieces = []
     n = len(tri)
     for start in range(0, n, CLIP_BATCH):
         stop = min(n, start + CLIP_BATCH)
         pieces.append(
-            clip_to_grid(tri[start:stop], normals[start:stop], grid.shape, np.arange(start, stop))
+            clip_to_grid(
+                tri[start:stop], normals[start:stop], grid.shape, np.arange(start, stop),
+                first=first[start:stop],
+            )  # fmt: skip
         )
         report(0.6 * stop / n, "clip")
     face = np.concatenate([p.face for p in pieces])

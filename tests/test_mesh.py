@@ -1,0 +1,341 @@
+"""Stage 1: the Mesh object, loading files with their materials, built-in scenes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from aniso3d import InputError, Mesh, load_mesh, scenes
+from aniso3d.mesh import DEFAULT_KD, DEFAULT_KS, DEFAULT_SHININESS, MAX_SHININESS, concatenate
+
+BYTE = 1.0 / 255 + 1e-7  # colours pass through 8-bit storage in most formats
+
+
+def centroids(mesh: Mesh) -> np.ndarray:
+    return mesh.triangles.mean(axis=1)
+
+
+# ------------------------------------------------------------------ Mesh object
+
+
+def test_mesh_from_arrays_broadcasts_material_and_types():
+    m = Mesh.from_arrays([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], [[0, 1, 2], [0, 1, 3]])
+    assert m.vertices.dtype == np.float64 and m.faces.dtype == np.int64
+    assert m.kd.shape == (2, 3) and m.kd.dtype == np.float32
+    np.testing.assert_allclose(m.kd, [DEFAULT_KD] * 2)
+    np.testing.assert_allclose(m.ks, DEFAULT_KS)
+    np.testing.assert_allclose(m.shininess, DEFAULT_SHININESS)
+    np.testing.assert_allclose(m.face_areas(), [0.5, 0.5])
+    assert m.area() == pytest.approx(1.0)
+    assert m.n_faces == 2 and m.triangles.shape == (2, 3, 3)
+    assert m.nbytes == 4 * 12 + 2 * 12 + 2 * 20
+
+
+def test_mesh_clamps_material_to_valid_ranges():
+    m = Mesh.from_arrays(
+        [[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], kd=[[2.0, -1.0, 0.5]], ks=7.0, shininess=1e9
+    )
+    np.testing.assert_allclose(m.kd, [[1.0, 0.0, 0.5]])
+    assert m.ks[0] == 1.0 and m.shininess[0] == MAX_SHININESS
+
+
+def test_bounds_ignore_unused_vertices():
+    m = Mesh.from_arrays([[0, 0, 0], [1, 0, 0], [0, 1, 0], [100, 100, 100]], [[0, 1, 2]])
+    np.testing.assert_array_equal(m.bounds, [[0, 0, 0], [1, 1, 0]])
+
+
+@pytest.mark.parametrize(
+    "vertices, faces, kwargs, match",
+    [
+        ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2, 0]], {}, "triangulate"),
+        ([[0, 0], [1, 0], [0, 1]], [[0, 1, 2]], {}, r"\(V, 3\)"),
+        ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.zeros((0, 3), int), {}, "no faces"),
+        ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0.0, 1.0, 2.0]], {}, "integer"),
+        ([[0, 0, 0], [np.nan, 0, 0], [0, 1, 0]], [[0, 1, 2]], {}, "NaN"),
+        ([[0, 0, 0], [np.inf, 0, 0], [0, 1, 0]], [[0, 1, 2]], {}, "Inf"),
+        ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 3]], {}, "outside 0..2"),
+        ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, -1, 2]], {}, "outside"),
+        ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], {"kd": [[1, 0, 0]] * 2}, "kd"),
+        ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], {"ks": np.nan}, "NaN"),
+    ],
+    ids=["quads", "2d", "no-faces", "float-faces", "nan", "inf", "index-high", "index-negative",
+         "kd-shape", "ks-nan"],
+)  # fmt: skip
+def test_mesh_rejects_bad_arrays(vertices, faces, kwargs, match):
+    with pytest.raises(InputError, match=match):
+        Mesh.from_arrays(np.asarray(vertices, float), np.asarray(faces), **kwargs)
+
+
+def test_transformed_and_trimesh_round_trip():
+    m = scenes.cube(size=2.0, kd=(0.2, 0.4, 0.6))
+    t = np.eye(4)
+    t[:3, 3] = [10, 0, -5]
+    moved = m.transformed(t)
+    np.testing.assert_allclose(moved.bounds, m.bounds + [[10, 0, -5]])
+    assert moved.area() == pytest.approx(m.area())
+    tm = m.to_trimesh()
+    assert len(tm.faces) == m.n_faces and tm.area == pytest.approx(24.0)
+    np.testing.assert_allclose(tm.visual.face_colors[:, :3] / 255, m.kd, atol=BYTE)
+
+
+def test_concatenate_keeps_each_faces_material():
+    a = scenes.quad(kd=(1, 0, 0), ks=0.3, shininess=5)
+    b = scenes.quad(center=(0, 0, 1), kd=(0, 0, 1), ks=0.9, shininess=50)
+    m = concatenate([a, b], name="ab")
+    assert m.n_faces == 4 and m.name == "ab"
+    np.testing.assert_allclose(m.kd, [[1, 0, 0]] * 2 + [[0, 0, 1]] * 2)
+    np.testing.assert_allclose(m.ks, [0.3, 0.3, 0.9, 0.9], rtol=1e-6)
+    np.testing.assert_allclose(m.triangles[2:], b.triangles)
+    with pytest.raises(InputError, match="empty"):
+        concatenate([])
+
+
+# --------------------------------------------------------------------- loading
+
+MTL = """\
+newmtl leaf
+Kd 0.1 0.6 0.2
+Ks 0.4 0.4 0.4
+Ns 40
+newmtl bark
+Kd 0.4 0.25 0.1
+Ks 0.05 0.05 0.05
+Ns 8
+"""
+
+OBJ = """\
+mtllib two.mtl
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+v 0 0 1
+v 1 0 1
+v 5 5 5
+v 6 5 5
+v 5 6 5
+usemtl leaf
+f 1 2 3
+f 1 3 4
+usemtl bark
+f 1 2 6 5
+f 7 8 9
+"""
+
+
+def test_obj_with_mtl_gives_per_face_material(tmp_path):
+    (tmp_path / "two.mtl").write_text(MTL)
+    (tmp_path / "two.obj").write_text(OBJ)
+    m = load_mesh(tmp_path / "two.obj")
+    assert m.name == "two"
+    assert m.n_faces == 5  # the quad face is triangulated
+    assert m.area() == pytest.approx(1.0 + 1.0 + 0.5)
+    c = centroids(m)
+    leaf = np.isclose(c[:, 2], 0.0)
+    bark = ~leaf
+    assert leaf.sum() == 2 and bark.sum() == 3
+    np.testing.assert_allclose(m.kd[leaf], [[0.1, 0.6, 0.2]] * 2, atol=BYTE)
+    np.testing.assert_allclose(m.kd[bark], [[0.4, 0.25, 0.1]] * 3, atol=BYTE)
+    np.testing.assert_allclose(m.ks[leaf], 0.4, atol=BYTE)
+    np.testing.assert_allclose(m.ks[bark], 0.05, atol=BYTE)
+    np.testing.assert_allclose(m.shininess[leaf], 40.0)
+    np.testing.assert_allclose(m.shininess[bark], 8.0)
+
+
+def test_obj_without_mtl_gets_defaults(tmp_path):
+    (tmp_path / "plain.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    m = load_mesh(tmp_path / "plain.obj", name="custom")
+    assert m.name == "custom" and m.n_faces == 1
+    np.testing.assert_allclose(m.kd, [DEFAULT_KD])
+    np.testing.assert_allclose(m.ks, [DEFAULT_KS])
+    np.testing.assert_allclose(m.shininess, [DEFAULT_SHININESS])
+
+
+def _coloured_quad():
+    import trimesh
+
+    tm = trimesh.Trimesh(
+        [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 3]], process=False
+    )
+    tm.visual.face_colors = [[255, 0, 0, 255], [0, 128, 255, 255]]
+    return tm
+
+
+def test_ply_with_face_colours(tmp_path):
+    _coloured_quad().export(tmp_path / "q.ply")
+    m = load_mesh(tmp_path / "q.ply")
+    assert m.n_faces == 2 and m.area() == pytest.approx(1.0)
+    np.testing.assert_allclose(m.kd, [[1, 0, 0], [0, 128 / 255, 1]], atol=BYTE)
+
+
+def test_ply_with_vertex_colours_averages_per_face(tmp_path):
+    import trimesh
+
+    tm = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], process=False)
+    tm.visual.vertex_colors = [[255, 0, 0, 255], [0, 255, 0, 255], [0, 0, 255, 255]]
+    tm.export(tmp_path / "v.ply")
+    m = load_mesh(tmp_path / "v.ply")
+    np.testing.assert_allclose(m.kd, [[1 / 3, 1 / 3, 1 / 3]], atol=BYTE)
+
+
+def test_stl(tmp_path):
+    scenes.cube(size=2.0).to_trimesh().export(tmp_path / "c.stl")
+    m = load_mesh(tmp_path / "c.stl")
+    assert m.n_faces == 12 and m.area() == pytest.approx(24.0, rel=1e-6)
+    np.testing.assert_allclose(m.kd, np.tile(DEFAULT_KD, (12, 1)))
+
+
+def test_glb_exported_by_trimesh_keeps_face_colours(tmp_path):
+    tm = _coloured_quad()
+    tm.unmerge_vertices()  # glTF stores colours per vertex: keep faces apart
+    tm.export(tmp_path / "q.glb")
+    m = load_mesh(tmp_path / "q.glb")
+    assert m.n_faces == 2 and m.area() == pytest.approx(1.0)
+    c = centroids(m)
+    first = c[:, 0] > c[:, 1]  # face [0, 1, 2] lies below the diagonal
+    np.testing.assert_allclose(m.kd[first], [[1, 0, 0]], atol=BYTE)
+    np.testing.assert_allclose(m.kd[~first], [[0, 128 / 255, 1]], atol=BYTE)
+
+
+def test_glb_pbr_material_and_scene_transforms(tmp_path):
+    import trimesh
+
+    tri = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], process=False)
+    tri.visual = trimesh.visual.TextureVisuals(
+        material=trimesh.visual.material.PBRMaterial(
+            baseColorFactor=[0.2, 0.4, 0.6, 1.0], roughnessFactor=0.5, metallicFactor=0.0
+        )
+    )
+    scene = trimesh.Scene()
+    t = np.eye(4)
+    t[:3, 3] = [10, 20, 30]
+    scene.add_geometry(tri, transform=t)
+    scene.export(tmp_path / "pbr.glb")
+    m = load_mesh(tmp_path / "pbr.glb")
+    np.testing.assert_allclose(m.bounds, [[10, 20, 30], [11, 21, 30]], atol=1e-6)
+    np.testing.assert_allclose(m.kd, [[0.2, 0.4, 0.6]], atol=BYTE)
+    # roughness 0.5 -> Blinn-Phong exponent 2 / r^4 - 2 = 30, ks = 0.04 + 0.5 (1 - r)
+    np.testing.assert_allclose(m.shininess, [30.0], rtol=1e-5)
+    np.testing.assert_allclose(m.ks, [0.29], rtol=1e-5)
+
+
+# ---------------------------------------------------------------- load errors
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(InputError, match="does not exist") as info:
+        load_mesh(tmp_path / "nope.obj")
+    assert "nope.obj" in str(info.value)
+
+
+def test_directory(tmp_path):
+    with pytest.raises(InputError, match="directory"):
+        load_mesh(tmp_path)
+
+
+def test_empty_file(tmp_path):
+    (tmp_path / "e.obj").write_bytes(b"")
+    with pytest.raises(InputError, match="empty"):
+        load_mesh(tmp_path / "e.obj")
+
+
+@pytest.mark.parametrize("name", ["mesh.xyz", "mesh", "mesh.obj.bak"])
+def test_unknown_suffix(tmp_path, name):
+    (tmp_path / name).write_text("v 0 0 0\n")
+    with pytest.raises(InputError, match="suffix") as info:
+        load_mesh(tmp_path / name)
+    assert ".obj" in str(info.value)  # lists what is supported
+
+
+def test_nan_coordinates_in_a_file(tmp_path):
+    (tmp_path / "nan.obj").write_text("v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n")
+    with pytest.raises(InputError, match="NaN") as info:
+        load_mesh(tmp_path / "nan.obj")
+    assert "nan.obj" in str(info.value)
+
+
+def test_faces_indexing_missing_vertices_in_a_file(tmp_path):
+    (tmp_path / "bad.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n")
+    with pytest.raises(InputError) as info:
+        load_mesh(tmp_path / "bad.obj")
+    assert "bad.obj" in str(info.value)
+
+
+def test_garbage_with_a_mesh_suffix(tmp_path):
+    for suffix in (".stl", ".ply", ".glb", ".obj"):
+        p = tmp_path / f"junk{suffix}"
+        p.write_bytes(np.random.default_rng(3).bytes(2000))
+        with pytest.raises(InputError) as info:
+            load_mesh(p)
+        assert p.name in str(info.value), suffix
+
+
+def test_point_cloud_file_is_not_a_mesh(tmp_path):
+    import trimesh
+
+    trimesh.PointCloud(np.random.default_rng(0).random((20, 3))).export(tmp_path / "pts.ply")
+    with pytest.raises(InputError, match="no triangles"):
+        load_mesh(tmp_path / "pts.ply")
+
+
+# ---------------------------------------------------------------------- scenes
+
+
+def test_tree_is_deterministic_per_seed_and_differs_across_seeds():
+    a = scenes.tree(seed=3, levels=4, leaves_per_twig=20)
+    b = scenes.tree(seed=3, levels=4, leaves_per_twig=20)
+    c = scenes.tree(seed=4, levels=4, leaves_per_twig=20)
+    for name in ("vertices", "faces", "kd", "ks", "shininess"):
+        x, y = getattr(a, name), getattr(b, name)
+        assert x.dtype == y.dtype and x.tobytes() == y.tobytes(), name
+    assert a.n_faces == c.n_faces  # same structure...
+    assert not np.array_equal(a.vertices, c.vertices)  # ...different shape
+    assert not np.array_equal(a.kd, c.kd)
+
+
+def test_default_tree_is_the_big_one():
+    t = scenes.tree()
+    assert 200_000 < t.n_faces < 400_000
+    extent = t.bounds[1] - t.bounds[0]
+    assert 8 < extent[1] < 16  # about 10 m tall, y up
+    assert np.all(t.face_areas() > 0)
+    # bark and leaves
+    assert len(np.unique(t.ks)) == 2
+
+
+@pytest.mark.parametrize(
+    "kwargs", [{"levels": 0}, {"children": 0}, {"leaves_per_twig": -1}, {"sides": 2}, {"height": 0},
+               {"leaf_size": -1}],
+)  # fmt: skip
+def test_tree_rejects_bad_parameters(kwargs):
+    with pytest.raises(InputError):
+        scenes.tree(**kwargs)
+
+
+@pytest.mark.parametrize("axis", [0, 1, 2])
+def test_quad_faces_its_axis(axis):
+    from aniso3d.clip import triangle_normals
+
+    q = scenes.quad(size=3.0, center=(1, 2, 3), normal_axis=axis)
+    n, _ = triangle_normals(q.triangles)
+    want = np.zeros(3)
+    want[axis] = 1
+    np.testing.assert_allclose(n, [want, want], atol=1e-15)
+    assert q.area() == pytest.approx(9.0)
+    np.testing.assert_allclose(q.triangles.reshape(-1, 3).mean(0)[axis], [1, 2, 3][axis])
+
+
+def test_cube_and_sphere():
+    from aniso3d.clip import triangle_normals
+
+    c = scenes.cube(size=2.0, center=(1, 1, 1))
+    assert c.area() == pytest.approx(24.0)
+    n, _ = triangle_normals(c.triangles)
+    outward = np.einsum("ij,ij->i", n, centroids(c) - 1.0)
+    assert np.all(outward > 0)
+    s = scenes.sphere(radius=2.0, subdivisions=3)
+    assert s.n_faces == 20 * 4**3
+    assert s.area() == pytest.approx(4 * np.pi * 4, rel=0.02)
+    with pytest.raises(InputError, match="unknown built-in scene"):
+        scenes.get_scene("teapot")
+    assert scenes.get_scene("quad").n_faces == 2
