@@ -1,0 +1,67 @@
+"""``aniso3d view``: the interactive window (see :mod:`aniso3d.viewer`).
+
+Registered by :func:`aniso3d.cli.build_parser`. Errors (a bad input, no
+display, no OpenGL, pyglet missing) are :class:`~aniso3d.errors.Aniso3DError`
+and reach the user as one line and exit status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from .cli import image_size, load_input, positive_int
+
+METHOD_CHOICES = ("mesh", "volume", "splat")
+
+
+def register(sub) -> None:
+    from .viewer import CONTROLS, DEFAULT_RESOLUTION, QUALITIES, SPLATS
+
+    keys = "\n".join(f"  {k:<20}{a}" for k, a in CONTROLS)
+    p = sub.add_parser(
+        "view",
+        help="open an interactive window on a mesh, texture or point cloud (needs a display)",
+        description=(
+            "Look around a scene live with the three renderers. Needs a display and the "
+            "optional extra: pip install 'aniso3d[viewer]'. Without a display, use "
+            "'aniso3d render'."
+        ),
+        epilog="controls:\n" + keys,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("input", nargs="?", default=None,
+                   help="mesh file, saved texture (.a3d), PLY point cloud, or scene:NAME "
+                        "(cube, sphere, quad, tree); default: the built-in tree")  # fmt: skip
+    p.add_argument("--size", type=image_size, default=(960, 640), help="window size, e.g. 1280x800")
+    p.add_argument("--method", choices=METHOD_CHOICES, default=None,
+                   help="renderer to start with (default: what the input is)")  # fmt: skip
+    p.add_argument("--resolution", "-r", type=positive_int, default=DEFAULT_RESOLUTION,
+                   help="voxels along the longest axis when a mesh is converted")  # fmt: skip
+    p.add_argument(
+        "--directions", "-k", type=positive_int, default=64, help="sphere sample directions K"
+    )
+    p.add_argument("--placement", choices=("centroid", "center", "sphere"), default="centroid")
+    p.add_argument("--splat", choices=SPLATS, default="disc")
+    p.add_argument("--quality", choices=QUALITIES, default="fast")
+    p.add_argument("--screenshot-dir", default=".", help="folder for screenshots (key c or F12)")
+    p.set_defaults(func=cmd_view)
+
+
+def cmd_view(args) -> int:
+    from .viewer import Settings, check_display, run_viewer
+
+    check_display()  # no display: say so before spending time on loading
+    thing = load_input(args.input)
+    settings = Settings(
+        method=args.method,
+        splat=args.splat,
+        quality=args.quality,
+        placement=args.placement,
+        resolution=args.resolution,
+        directions=args.directions,
+    )
+    name = "tree" if args.input is None else Path(args.input).name
+    return run_viewer(
+        thing, name, size=args.size, settings=settings, screenshot_dir=args.screenshot_dir
+    )
