@@ -1,0 +1,226 @@
+#version 330
+// Splat renderer (c), vertex stage: one oriented point -> the pixel box its
+// splat may cover, and the constants that let splat.frag intersect it exactly.
+//
+// In (one vertex per point, positions relative to the cloud's local origin):
+//   in_position (local frame), in_normal (unit, world orientation),
+//   in_size = sqrt(area) (world units), in_kd (RGB), in_spec = (ks, shininess).
+// Out: SplatData (all flat), and
+//   SPRITE path (default): gl_Position at the box centre and a gl_PointSize
+//   covering the box; splats whose box is wider than u_max_sprite, or with
+//   nothing to draw, are moved outside the clip volume (culled);
+//   GEOMETRY_PATH: vs_box = the box (x0, y0, x1, y1) in pixels for splat.geom,
+//   which draws only the splats the sprite path culls for size (x0 > x1: none).
+//
+// The splat: centre p, unit normal n, tangent axes t, b divided by the
+// shape's half-axes (tu, tv). A pixel's eye ray is e + t d, d = f + x R + y U
+// (x, y in NDC, f the unit view direction), so d . f = 1 and t is the view
+// depth. To keep float32 precision with the eye far away (a telephoto view),
+// nothing eye-relative is formed here: with t0 the view depth of the cloud's
+// local origin and q0 = e + t0 f (the foot of the origin on the view axis;
+// both from float64 on the CPU), g = q0 - p is of the cloud's size and the
+// ray point is q0 + x t0 R + y t0 U + s d, with s = t - t0. The ray meets the
+// plane at s = -(C . (1, x, y)) / w', w' = n . d, and the plane point's shape
+// coordinates are u = u' / w', v = v' / w', where u', v', w', C are linear
+// in (1, x, y) (products of two linear functions whose quadratic terms cancel):
+// rows hu, hv, hw, hc of the homography from the screen to the splat's plane.
+// Rows are negated when n faces away from the eye, so w' > 0 <=> t > 0.
+// No division by n.d anywhere: a ray grazing the plane just has w' -> 0.
+// Window depth: K (t - near) / t = kn (delta w' - C), kn = K / num,
+// num = n . (p - e) = t w', delta = t0 - near; no large terms cancel.
+//
+// The box is the screen bounding box of the projected disc/ellipse (ROUND, when
+// it lies wholly beyond the near plane) or else of the shape's bounding
+// rectangle clipped to the near plane (exact for a square), grown to hold
+// the centre of the pixel containing the projected splat centre (that pixel
+// is always drawn: a splat never vanishes, however small or oblique) and
+// clamped to the viewport. Tangent frame, shared with render_splat.tangent_frame
+// and texture._tangent_basis: t = normalize(n x h), b = n x t, h = x if
+// |n.x| < 0.9 else y.
+
+uniform vec3 u_q0;           // e + t0 f, local frame (see above)
+uniform float u_t0;          // view depth of the local origin
+uniform mat3 u_view_rot;     // eye <- world rotation (rows: right, up, -forward)
+uniform mat3 u_ray;          // columns f, R = right tan(fov/2) aspect, U = up tan(fov/2)
+uniform vec2 u_proj_scale;   // (1 / (tan(fov/2) aspect), 1 / tan(fov/2))
+uniform vec2 u_viewport;     // framebuffer size, pixels
+uniform float u_near;        // clip distances, world units along the view axis
+uniform float u_far;
+uniform vec2 u_depth;        // (K, delta): window depth = K (t - near) / t, delta = t0 - near
+uniform vec2 u_extent;       // shape half-axes per unit of in_size
+uniform float u_max_sprite;  // widest point sprite the sprite path may draw, pixels
+uniform float u_push;        // visibility push-back, in units of the larger half-axis
+
+in vec3 in_position;
+in vec3 in_normal;
+in float in_size;
+in vec3 in_kd;
+in vec2 in_spec;
+
+out SplatData {
+    flat vec3 hu;          // rows of the homography (see above)
+    flat vec3 hv;
+    flat vec3 hw;
+    flat vec3 hc;
+    flat float num;        // distance of the eye from the splat's plane
+    flat float kn;         // K / num
+    flat vec2 centre_px;   // centre of the pixel holding the projected centre; -1e9 if none
+    flat float centre_z;   // window depth of the centre
+    flat float centre_zp;  // the same pushed back by push
+    flat float push;       // visibility-pass push-back along the view axis
+    flat int id;           // index of the point in the uploaded buffer
+    flat vec3 n;           // unit normal, world orientation
+    flat vec3 kd;
+    flat vec2 spec;        // (ks, shininess)
+} vs_out;
+
+#ifdef GEOMETRY_PATH
+flat out vec4 vs_box;
+#endif
+
+void grow(vec3 e, inout vec2 lo, inout vec2 hi) {
+    // e: an eye-frame point at view depth >= u_near > 0 (so no division by 0).
+    vec2 ndc = e.xy * u_proj_scale / (-e.z);
+    lo = min(lo, ndc);
+    hi = max(hi, ndc);
+}
+
+void cull() {
+#ifdef GEOMETRY_PATH
+    vs_box = vec4(1.0, 1.0, 0.0, 0.0);
+#else
+    gl_Position = vec4(0.0, 0.0, 2.0, 1.0);  // outside the clip volume
+    gl_PointSize = 1.0;
+#endif
+}
+
+// (a . (1, x, y)) (b . (1, x, y)) - (c . (1, x, y)) (d . (1, x, y)) when its
+// quadratic terms cancel: the coefficients of the linear rest.
+vec3 bilinear(vec3 a, vec3 b, vec3 c, vec3 d) {
+    vec3 r = a.x * b + b.x * a - c.x * d - d.x * c;
+    r.x -= a.x * b.x - c.x * d.x;
+    return r;
+}
+
+void main() {
+    vec3 n = in_normal;
+    vec3 helper = abs(n.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0);
+    vec3 t = normalize(cross(n, helper));
+    vec3 b = cross(n, t);
+    vec2 h = u_extent * in_size;
+    vec3 tu = t / max(h.x, 1e-30);
+    vec3 tv = b / max(h.y, 1e-30);
+
+    vec3 g = u_q0 - in_position;
+    vec3 rt = u_t0 * u_ray[1];
+    vec3 ut = u_t0 * u_ray[2];
+    vec3 nd = n * u_ray;  // (n.f, n.R, n.U): w'
+    vec3 nc = vec3(dot(n, g), dot(n, rt), dot(n, ut));
+    float num = u_t0 * nd.x - nc.x;  // n . (p - e)
+    float s = num < 0.0 ? -1.0 : 1.0;
+    vs_out.hu = s * bilinear(vec3(dot(tu, g), dot(tu, rt), dot(tu, ut)), nd, nc, tu * u_ray);
+    vs_out.hv = s * bilinear(vec3(dot(tv, g), dot(tv, rt), dot(tv, ut)), nd, nc, tv * u_ray);
+    vs_out.hw = s * nd;
+    vs_out.hc = s * nc;
+    vs_out.num = abs(num);
+    vs_out.kn = num != 0.0 ? u_depth.x / abs(num) : 0.0;
+    vs_out.id = gl_VertexID;
+    vs_out.n = n;
+    vs_out.kd = in_kd;
+    vs_out.spec = in_spec;
+    float push = u_push * max(h.x, h.y);
+    vs_out.push = push;
+    vs_out.centre_px = vec2(-1e9);
+    float gf = dot(g, u_ray[0]);
+    float depth = u_t0 - gf;  // view depth of the centre
+    vs_out.centre_z = depth > 0.0 ? u_depth.x * (u_depth.y - gf) / depth : 0.0;
+    vs_out.centre_zp = depth + push > 0.0 ? u_depth.x * (u_depth.y - gf + push) / (depth + push) : 0.0;
+
+    if (!(h.x > 0.0 && h.y > 0.0)) {  // zero area: nothing to draw
+        cull();
+        return;
+    }
+
+    // NDC box of the shape, clipped to view depth >= near.
+    vec3 ce = u_view_rot * -g - vec3(0.0, 0.0, u_t0);  // eye frame: z = -view depth
+    vec3 te = u_view_rot * (t * h.x);
+    vec3 be = u_view_rot * (b * h.y);
+    vec2 lo = vec2(1e30);
+    vec2 hi = vec2(-1e30);
+    float nearest = 1e30;  // smallest view depth of the shape
+    bool boxed = false;
+#if ROUND
+    // An ellipse wholly in front of the near plane projects to an ellipse;
+    // its box from the dual conic M diag(1, 1, -1) M^T, M mapping (u, v, 1)
+    // on the unit disc to homogeneous NDC, written relative to the projected
+    // centre (no cancellation for splats far smaller than their distance).
+    nearest = -ce.z - length(vec2(te.z, be.z));
+    if (nearest >= u_near) {
+        vec3 r2 = -vec3(te.z, be.z, ce.z);
+        vec2 mid = ce.xy * u_proj_scale / r2.z;
+        vec3 r0 = u_proj_scale.x * vec3(te.x, be.x, ce.x) - mid.x * r2;
+        vec3 r1 = u_proj_scale.y * vec3(te.y, be.y, ce.y) - mid.y * r2;
+        r0.z = 0.0;  // zero by construction; drop the rounding residue
+        r1.z = 0.0;
+        vec3 dr2 = r2 * vec3(1.0, 1.0, -1.0);
+        float c22 = dot(dr2, r2);  // < 0: the ellipse is in front of the eye
+        vec2 c02 = vec2(dot(dr2, r0), dot(dr2, r1));
+        vec2 c00 = vec2(dot(r0.xy, r0.xy), dot(r1.xy, r1.xy));
+        vec2 half_ = sqrt(max(c02 * c02 - c00 * c22, 0.0)) / -c22;
+        vec2 centre = mid + c02 / c22;
+        half_ = half_ * 1.001 + 1e-3 / u_viewport;  // float slack, < 0.01 px
+        lo = centre - half_;
+        hi = centre + half_;
+        boxed = true;
+    }
+#endif
+    if (!boxed) {
+        // The bounding rectangle's corners, its edges clipped to depth >= near.
+        vec3 q[4] = vec3[4](ce - te - be, ce + te - be, ce + te + be, ce - te + be);
+        for (int i = 0; i < 4; ++i) {
+            vec3 p0 = q[i];
+            vec3 p1 = q[(i + 1) % 4];
+            float d0 = -p0.z;
+            float d1 = -p1.z;
+            nearest = min(nearest, d0);
+            if (d0 >= u_near) grow(p0, lo, hi);
+            if ((d0 >= u_near) != (d1 >= u_near)) grow(mix(p0, p1, (u_near - d0) / (d1 - d0)), lo, hi);
+        }
+    }
+    if (lo.x > hi.x || nearest > u_far) {  // all behind the near plane, or beyond far
+        cull();
+        return;
+    }
+    lo = (lo * 0.5 + 0.5) * u_viewport;
+    hi = (hi * 0.5 + 0.5) * u_viewport;
+
+    if (depth >= u_near && depth <= u_far) {
+        vec2 p = (ce.xy * u_proj_scale / depth * 0.5 + 0.5) * u_viewport;
+        if (all(greaterThanEqual(p, vec2(0.0))) && all(lessThan(p, u_viewport))) {
+            vec2 px = floor(p);
+            vs_out.centre_px = px + 0.5;  // gl_FragCoord of that pixel, exactly
+            lo = min(lo, px + 0.25);
+            hi = max(hi, px + 0.75);
+        }
+    }
+    lo = max(lo, vec2(0.0));
+    hi = min(hi, u_viewport);
+    if (any(greaterThanEqual(lo, hi))) {  // off screen
+        cull();
+        return;
+    }
+    float size = max(hi.x - lo.x, hi.y - lo.y) + 0.02;
+#ifdef GEOMETRY_PATH
+    vs_box = size > u_max_sprite ? vec4(lo - 0.01, hi + 0.01) : vec4(1.0, 1.0, 0.0, 0.0);
+#else
+    if (size > u_max_sprite) {
+        cull();
+        return;
+    }
+    // Clip-space z: the centre's depth (used only for early depth by the
+    // floor benchmark; the splat passes write gl_FragDepth).
+    float zc = clamp(2.0 * vs_out.centre_z - 1.0, -1.0, 1.0);
+    gl_Position = vec4((lo + hi) / u_viewport - 1.0, zc, 1.0);
+    gl_PointSize = size;
+#endif
+}
