@@ -158,6 +158,33 @@ class Camera:
         dist = margin * radius / np.sin(np.radians(fov) / 2) * distance_scale
         return cls(tuple(center + d * dist), tuple(center), up, fov)
 
+    @classmethod
+    def fit(
+        cls,
+        bounds: np.ndarray,
+        direction=(0.55, 0.35, 1.0),
+        fov: float = 40.0,
+        aspect: float = 1.0,
+        margin: float = 1.1,
+        up=(0.0, 1.0, 0.0),
+        distance_scale: float = 1.0,
+    ) -> Camera:
+        """Like :meth:`frame`, but just far enough that the eight corners of
+        ``bounds`` fit an image of ``aspect`` (width / height) with ``margin``:
+        a tighter fit than the bounding sphere."""
+        base = cls.frame(bounds, direction, fov, up=up)
+        b = np.asarray(bounds, dtype=np.float64)
+        target = np.asarray(base.target)
+        right, upv, fwd = base.basis()
+        corners = np.array([[x, y, z] for x in b[:, 0] for y in b[:, 1] for z in b[:, 2]]) - target
+        tan_v = np.tan(np.radians(fov) / 2)
+        tan_h = tan_v * aspect
+        toward_eye = corners @ -fwd
+        need = np.maximum(np.abs(corners @ right) / tan_h, np.abs(corners @ upv) / tan_v) * margin
+        radius = max(0.5 * float(np.linalg.norm(b[1] - b[0])), 1e-12)
+        dist = max(float(np.max(toward_eye + need)), float(np.max(toward_eye)) + 1e-3 * radius)
+        return cls(tuple(target - fwd * dist * distance_scale), tuple(target), up, fov)
+
     def orbit(self, degrees: float, axis=None) -> Camera:
         """The camera turned by ``degrees`` about ``axis`` (default: its up
         vector) through the target, keeping the distance."""

@@ -156,22 +156,9 @@ class Orbit:
             self.aspect = float(aspect)
         self.azimuth, self.elevation = HOME_AZIMUTH, HOME_ELEVATION
         home = _direction(self.azimuth, self.elevation)
-        cam = Camera.frame(self.bounds, home, self.fov)
+        cam = Camera.fit(self.bounds, home, self.fov, self.aspect, FRAME_MARGIN)
         self.target = np.asarray(cam.target, dtype=np.float64)
-        right, up, _ = cam.basis()
-        lo, hi = self.bounds
-        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
-                            for z in (lo[2], hi[2])]) - self.target  # fmt: skip
-        tan_v = math.tan(math.radians(self.fov) / 2)
-        tan_h = tan_v * self.aspect
-        toward_eye = corners @ home
-        need = (
-            np.maximum(np.abs(corners @ right) / tan_h, np.abs(corners @ up) / tan_v) * FRAME_MARGIN
-        )
-        radius = 0.5 * float(np.linalg.norm(hi - lo))
-        self.distance = float(
-            max(np.max(toward_eye + need), np.max(toward_eye) + 1e-3 * radius, 1e-12)
-        )
+        self.distance = float(np.linalg.norm(np.subtract(cam.position, cam.target)))
         self.home_distance = self.distance
 
     def camera(self) -> Camera:

@@ -81,3 +81,20 @@ def test_frame_fits_bounds_and_orbit_keeps_distance():
 def test_bad_cameras_are_refused(kwargs):
     with pytest.raises(InputError):
         Camera(**kwargs)
+
+
+@pytest.mark.parametrize("aspect", [0.5, 1.0, 2.0])
+def test_fit_puts_every_corner_inside_and_touches_an_edge(aspect):
+    b = np.array([[0.0, 0, 0], [3, 1, 0.5]])
+    size = (int(200 * aspect), 200)
+    cam = Camera.fit(b, direction=(0.3, 0.4, 1.0), fov=40, aspect=aspect, margin=1.1)
+    corners = np.array([[x, y, z] for x in b[:, 0] for y in b[:, 1] for z in b[:, 2]])
+    px = cam.project(corners, size, bounds=b)
+    assert px[:, 0].min() >= 0 and px[:, 0].max() <= size[0]
+    assert px[:, 1].min() >= 0 and px[:, 1].max() <= size[1]
+    # Tight: some corner reaches within the 10% margin of a border.
+    slack = np.minimum(np.minimum(px[:, 0], size[0] - px[:, 0]) / size[0],
+                       np.minimum(px[:, 1], size[1] - px[:, 1]) / size[1])  # fmt: skip
+    assert slack.min() < 0.1
+    sphere_dist = np.linalg.norm(np.subtract(Camera.frame(b, (0.3, 0.4, 1.0), 40).position, cam.target))
+    assert np.linalg.norm(np.subtract(cam.position, cam.target)) < sphere_dist
