@@ -149,6 +149,10 @@ def cmd_build(args) -> int:
         raise InputError(f"output '{out}' is a directory; name a file to write")
     if not out.parent.is_dir():
         raise InputError(f"output folder '{out.parent}' does not exist; create it first")
+    if args.mesh and Path(args.mesh).suffix.lower() == ".ply" and _ply_is_point_cloud(args.mesh):
+        raise InputError(
+            f"'{args.mesh}' is a point cloud (no faces); 'aniso3d build' needs a polygon mesh"
+        )
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     mesh = load_input(args.mesh)

@@ -219,6 +219,13 @@ def load_mesh(path: str | os.PathLike, name: str | None = None) -> Mesh:
         _check_binary_stl_size(p)
     try:
         scene = trimesh.load(str(p), force="scene", process=False)
+    except ModuleNotFoundError as exc:  # an optional loader, or a fallback for bad data
+        name = exc.name or "?"
+        raise InputError(
+            f"could not read mesh '{p}': trimesh needs the optional module '{name}' for it. If it "
+            f"is a valid {suffix} file, install that (pip install {name.replace('_', '-')}); else "
+            "the file is damaged or not in the format its suffix says"
+        ) from None
     except Exception as exc:  # trimesh raises many types for damaged files
         raise InputError(
             f"could not read mesh '{p}': {type(exc).__name__}: {exc}. "
@@ -229,7 +236,8 @@ def load_mesh(path: str | os.PathLike, name: str | None = None) -> Mesh:
         dumped = scene.dump(concatenate=False) if hasattr(scene, "dump") else [scene]
     except Exception as exc:
         raise InputError(
-            f"could not flatten the scene in '{p}': {str(exc).strip()}. The file may be truncated or damaged"
+            f"could not flatten the scene in '{p}': {str(exc).strip()}. "
+            "The file may be truncated or damaged"
         ) from None
     if suffix == ".ply":
         # trimesh reads a truncated ASCII PLY without a word: compare with the

@@ -42,10 +42,20 @@ def add_render_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--elevation", type=float, default=15.0, help="camera elevation, degrees")
     p.add_argument("--distance", type=positive_float, default=1.0,
                    help="camera distance as a multiple of the framing distance (>1 = farther)")
-    p.add_argument("--fov", type=float, default=40.0, help="vertical field of view, degrees")
+    p.add_argument("--fov", type=_fov, default=40.0, help="vertical field of view, degrees")
     p.add_argument("--camera-position", type=_vec3, default=None, metavar="X,Y,Z")
     p.add_argument("--camera-target", type=_vec3, default=None, metavar="X,Y,Z")
     p.add_argument("--backend", choices=("auto", "egl", "osmesa", "x11"), default="auto")
+
+
+def _fov(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of degrees, got '{text}'") from None
+    if not 0.0 < value < 180.0:
+        raise argparse.ArgumentTypeError(f"must be between 0 and 180 degrees, exclusive: {text}")
+    return value
 
 
 def _vec3(text: str) -> tuple[float, float, float]:
@@ -76,7 +86,8 @@ def camera_from_args(args, bounds: np.ndarray) -> Camera:
         return Camera(args.camera_position, target, fov=args.fov)
     az, el = np.radians(args.azimuth), np.radians(args.elevation)
     direction = (np.sin(az) * np.cos(el), np.sin(el), np.cos(az) * np.cos(el))
-    cam = Camera.frame(bounds, direction=direction, fov=args.fov, distance_scale=args.distance)
+    cam = Camera.fit(bounds, direction=direction, fov=args.fov, aspect=args.size[0] / args.size[1],
+                     distance_scale=args.distance)
     if args.camera_target is not None:
         cam = Camera(cam.position, args.camera_target, fov=args.fov)
     return cam
