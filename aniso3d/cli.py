@@ -277,7 +277,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"aniso3d {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:
-        print(f"aniso3d {args.command}: interrupted; no output was written", file=sys.stderr)
+        # Every file is written atomically: what was being written is not
+        # there, and earlier outputs (or frames already finished) are whole.
+        what = "frames finished so far are complete" if args.command == "frames" else "no output was written"
+        print(f"aniso3d {args.command}: interrupted; {what}", file=sys.stderr)
         return 128 + signal.SIGTERM if isinstance(exc, _Terminated) else 130
     except MemoryError:
         print(
