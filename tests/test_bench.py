@@ -1,0 +1,283 @@
+"""The bench command: sweep planning and geometry without a GPU, and a smoke
+run end to end (CSV, JSON, report, plots) on the software rasteriser."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from aniso3d import bench, cli, scenes
+from aniso3d.camera import Camera
+
+# ------------------------------------------------------------ without a GPU
+
+
+def test_pareto_front():
+    pts = [(1.0, 0.5), (2.0, 0.4), (3.0, 0.45), (0.5, 0.9), (2.0, 0.3), (5.0, 0.1)]
+    assert bench.pareto_front(pts) == [3, 0, 4, 5]
+    rows = [{"status": "ok", "camera": "a", "frame_s": c, "error": e} for c, e in pts] + [
+        {"status": "skipped", "camera": "a", "frame_s": None, "error": None}
+    ]
+    bench.mark_pareto(rows)
+    assert [r["pareto"] for r in rows] == [True, False, False, True, True, True, False]
+
+
+def test_cameras_put_a_baseline_voxel_at_the_stated_width():
+    settings = bench.PRESETS["full"]
+    bounds = np.array([[0.0, 0.0, 0.0], [8.0, 12.0, 6.0]])
+    cams = bench.make_cameras(bounds, settings)
+    assert cams[0].label == "fill" and cams[0].scale == 1.0
+    h = 12.0 / settings.baseline["resolution"]
+    for c in cams:
+        # Project a voxel-wide segment at the target, across the view.
+        right = c.camera.basis()[0]
+        target = np.asarray(c.camera.target)
+        xy = c.camera.project(np.stack([target, target + h * right]), settings.size, bounds)
+        assert np.linalg.norm(xy[1] - xy[0]) == pytest.approx(c.voxel_px, rel=1e-6)
+        x0, y0, x1, y1 = c.crop
+        assert 0 <= x0 < x1 <= settings.size[0] and 0 <= y0 < y1 <= settings.size[1]
+        assert min(x1 - x0, y1 - y0) >= 16
+    labels = [c.label for c in cams]
+    assert "1px" in labels and bench.near_far(cams)[1].label == "1px"
+    assert all(a.scale < b.scale for a, b in zip(cams, cams[1:], strict=False))
+
+
+def test_plan_is_one_axis_at_a_time_plus_the_grid():
+    settings = bench.PRESETS["full"]
+    bounds = np.array([[0.0, 0.0, 0.0], [10.0, 10.0, 10.0]])
+    cams = bench.make_cameras(bounds, settings)
+    plan = bench.plan_cases(settings, cams)
+    grid = [c for c, blocks in plan.items() if "grid" in blocks]
+    assert len(grid) == len(cams) * 5
+    near, far = bench.near_far(cams)
+    base = settings.baseline
+    for case, blocks in plan.items():
+        if case.method == "mesh":
+            assert blocks == ["grid"]
+            continue
+        differs = [
+            a for a, f in bench.AXES.items()
+            if getattr(case, f) is not None and getattr(case, f) != base[a]
+        ]  # fmt: skip
+        assert len(differs) <= 1, (case, differs)
+        if "grid" not in blocks:
+            assert case.camera in (near.label, far.label)
+    # The baseline splat at the near camera serves every block.
+    baseline_splat = next(c for c, b in plan.items() if c.method == "splat" and len(b) > 5)
+    assert baseline_splat.camera == near.label
+    # Splat-only axes never make volume cases.
+    for case, blocks in plan.items():
+        if case.method == "volume":
+            assert not set(blocks) & set(bench.SPLAT_AXES)
+
+
+def _row(method, axis, value, error, frame_s, nbytes, camera="fill"):
+    row = {c: None for c in bench.COLUMNS}
+    row.update(
+        status="ok",
+        method=method,
+        renderer=method,
+        blocks=axis,
+        camera=camera,
+        error=error,
+        frame_s=frame_s,
+        points_bytes=nbytes,
+        texture_bytes=nbytes,
+    )
+    row[bench.AXES[axis]] = value
+    return row  # fmt: skip
+
+
+def test_recommend_prefers_cheaper_values_only_within_tolerance():
+    rows = [
+        # K: 16 is within 1% of 64 and smaller -> 16; 256 is no better.
+        _row("volume", "directions", 16, 0.1005, 0.10, 10),
+        _row("volume", "directions", 64, 0.1000, 0.10, 30),
+        _row("volume", "directions", 256, 0.1001, 0.10, 90),
+        # Resolution: 32 is the most accurate and the smallest; 64 is faster but
+        # larger, so it does not win on time.
+        _row("volume", "resolution", 32, 0.1000, 0.30, 10),
+        _row("volume", "resolution", 64, 0.1001, 0.10, 40),
+        # Shape: same bytes; ellipse within 1% and faster -> ellipse.
+        _row("splat", "splat", "square", 0.2000, 0.20, 5),
+        _row("splat", "splat", "disc", 0.2500, 0.05, 5),
+        _row("splat", "splat", "ellipse", 0.2010, 0.10, 5),
+        # Placement: centroid clearly best, the others cheaper but worse.
+        _row("splat", "placement", "centroid", 0.10, 0.3, 5),
+        _row("splat", "placement", "center", 0.12, 0.1, 5),
+        _row("splat", "placement", "centroid", 0.20, 0.3, 5, camera="far"),
+        _row("splat", "placement", "center", 0.21, 0.1, 5, camera="far"),
+    ]
+    rec = {(r["axis"], r["renderer"]): r for r in bench.recommend(rows)}
+    assert rec["directions", "volume"]["value"] == 16 and rec["directions", "volume"]["best"] == 64
+    assert rec["splat", "splat"]["value"] == "ellipse" and rec["splat", "splat"]["best"] == "square"
+    assert rec["placement", "splat"]["value"] == "centroid"
+    assert rec["resolution", "volume"]["value"] == 32
+    assert rec["placement", "splat"]["table"]["centroid"][0] == pytest.approx(0.15)
+    assert ("placement", "volume") not in rec
+
+
+def test_case_render_options():
+    base = bench.PRESETS["full"].baseline
+    splat = bench._splat_case("fill", base)
+    assert splat.render_options() == {"splat": "square", "quality": "fast"}
+    assert splat.points_key is not None
+    vol = bench._volume_case("fill", base)
+    assert vol.render_options() == {"normal": "mean"}
+    # Level of detail: the renderer makes the points, so it gets their options.
+    lod = replace(splat, extra=(("lod", True), ("pixel_error", 2.0)))
+    assert lod.lod and lod.points_key is None
+    assert lod.render_options() == {
+        "splat": "square", "quality": "fast", "placement": "centroid", "per_entry": 1,
+        "point_normal": "mean", "lod": True, "pixel_error": 2.0,
+    }  # fmt: skip
+    quick = bench.PRESETS["quick"]
+    cam = bench.make_cameras(np.array([[0.0, 0, 0], [1, 1, 1]]), quick)[0]
+    row = bench._blank_row(lod, ["lod"], cam, quick, scenes.quad())
+    assert row["lod"] is True and row["pixel_error"] == 2.0 and "extra" not in row
+    assert bench.label(row).endswith("lod")
+
+
+def test_missing_renderer_is_skipped_other_errors_fail():
+    exc = ModuleNotFoundError("No module named 'aniso3d.render_splat'", name="aniso3d.render_splat")
+    status, reason = bench.classify_failure(exc, "splat")
+    assert status == "skipped" and "render_splat" in reason
+    assert bench.classify_failure(NotImplementedError("soon"), "volume")[0] == "skipped"
+    assert bench.classify_failure(ValueError("bad"), "volume") == ("failed", "ValueError: bad")
+    other = ModuleNotFoundError("No module named 'numpy'", name="numpy")
+    assert bench.classify_failure(other, "splat")[0] == "failed"
+
+
+def test_csv_and_json_keep_every_column_and_mark_unmeasured_values():
+    rows = [
+        {**{c: None for c in bench.COLUMNS}, "status": "ok", "psnr": math.inf, "ssim": 1.0,
+         "flip": math.nan, "lod_level": 3},
+    ]  # fmt: skip
+    text = bench.to_csv(rows).decode()
+    header, line = list(csv.reader(text.splitlines()))
+    assert header[: len(bench.COLUMNS)] == list(bench.COLUMNS) and header[-1] == "lod_level"
+    cell = dict(zip(header, line, strict=True))
+    assert cell["psnr"] == "inf" and cell["flip"] == "" and cell["lod_level"] == "3"
+    doc = json.loads(bench.to_json(bench.BenchResult(rows, {"x": math.inf}, {})))
+    assert doc["rows"][0]["psnr"] is None and doc["meta"]["x"] is None
+
+
+# --------------------------------------------------------------- on the GPU
+
+
+@pytest.fixture(scope="module")
+def gl_available():
+    from aniso3d.context import GLContext
+    from aniso3d.errors import ResourceError
+
+    try:
+        GLContext().release()
+    except ResourceError as exc:
+        pytest.skip(f"no OpenGL 3.3 context: {exc}")
+
+
+def _check_outputs(out, expect_plots: bool) -> list[dict]:
+    for name in ("results.csv", "results.json", "report.md"):
+        assert (out / name).is_file(), name
+    for name in bench.PLOTS:
+        assert (out / name).is_file() == expect_plots, name
+        if expect_plots:
+            assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with open(out / "results.csv", newline="") as fh:
+        reader = csv.DictReader(fh)
+        assert reader.fieldnames[: len(bench.COLUMNS)] == list(bench.COLUMNS)
+        rows = list(reader)
+    doc = json.loads((out / "results.json").read_text())
+    assert len(doc["rows"]) == len(rows) > 0
+    assert doc["meta"]["colour_space"] == bench.COLOUR_SPACE
+    report = (out / "report.md").read_text()
+    for heading in ("## Data size", "## Aliasing", "## Speed against accuracy", "## Recommended"):
+        assert heading in report
+    assert "sRGB-encoded" in report
+    return rows
+
+
+@pytest.mark.gpu
+def test_bench_smoke_end_to_end(gl_available, tmp_path, capsys):
+    from aniso3d import metrics
+
+    out = tmp_path / "bench"
+    assert cli.main(["bench", "--smoke", "-o", str(out), "-q"]) == 0
+    rows = _check_outputs(out, expect_plots=bench.matplotlib_available())
+    assert {r["renderer"] for r in rows} >= {"mesh-1spp", "mesh-2x2", "volume", "splat"}
+    measured = [r for r in rows if r["status"] == "ok"]
+    assert any(r["method"] == "mesh" for r in measured)
+    for r in rows:
+        assert r["status"] in ("ok", "skipped"), r["reason"]
+        assert float(r["mesh_bytes"]) > 0 and int(r["n_triangles"]) > 0
+        if r["method"] != "mesh":
+            assert float(r["texture_bytes"]) > 0 and float(r["build_s"]) > 0
+        if r["method"] == "splat":
+            assert float(r["points_bytes"]) == 48 * int(r["n_points"])
+    for r in measured:
+        for key in (
+            "frame_s",
+            "frame_wall_s",
+            "first_frame_s",
+            "psnr",
+            "ssim",
+            "error",
+            "coverage",
+        ):
+            assert math.isfinite(float(r[key])), (key, r)
+        assert float(r["frame_s"]) > 0 and -1 <= float(r["ssim"]) <= 1
+        if metrics.flip_available():
+            assert 0 <= float(r["flip"]) <= 1
+    assert "wrote" in capsys.readouterr().out
+
+
+@pytest.mark.gpu
+def test_unavailable_renderer_is_recorded_as_skipped(gl_available, tmp_path, monkeypatch):
+    from aniso3d.renderer import Renderer
+
+    real = Renderer.method_renderer
+
+    def no_splat(self, method):
+        if method == "splat":
+            raise ModuleNotFoundError(
+                "No module named 'aniso3d.render_splat'", name="aniso3d.render_splat"
+            )
+        return real(self, method)
+
+    monkeypatch.setattr(Renderer, "method_renderer", no_splat)
+    monkeypatch.setattr(bench, "matplotlib_available", lambda: False)
+    settings = replace(bench.PRESETS["smoke"], size=(64, 64), resolutions=(16,), mesh_ssaa=(1,))
+    mesh = scenes.tree(levels=4, leaves_per_twig=20)
+    result = bench.run_bench(mesh, settings, with_flip=False)
+    splat = [r for r in result.rows if r["method"] == "splat"]
+    assert splat and all(r["status"] == "skipped" and "render_splat" in r["reason"] for r in splat)
+    assert all(r["status"] == "ok" for r in result.rows if r["method"] != "splat")
+    assert all(r["points_bytes"] > 0 for r in splat)  # built and counted even when not drawn
+    out = tmp_path / "out"
+    out.mkdir()
+    bench.write_outputs(result, out)
+    _check_outputs(out, expect_plots=False)
+    report = (out / "report.md").read_text()
+    assert "Plots skipped: matplotlib is not installed" in report
+    assert "FLIP not computed" in report
+    assert "skipped: renderer 'splat' not available yet" in report
+
+
+def test_bench_refuses_a_file_as_output_folder(tmp_path, capsys):
+    target = tmp_path / "mesh.obj"
+    target.write_text("v 0 0 0\n")
+    assert cli.main(["bench", str(target), "--smoke", "-o", str(target)]) == 2
+    assert "is a file" in capsys.readouterr().err
+    assert target.read_text() == "v 0 0 0\n"
+
+
+def test_frame_filling_camera_matches_camera_frame():
+    bounds = np.array([[-1.0, 0.0, -1.0], [1.0, 3.0, 1.0]])
+    cams = bench.make_cameras(bounds, bench.PRESETS["quick"])
+    ref = Camera.frame(bounds)
+    assert cams[0].camera == ref
