@@ -17,6 +17,7 @@ import numpy as np
 from .camera import Camera, turntable
 from .cli import Progress, image_size, load_input, positive_float, positive_int
 from .errors import InputError
+from .lod import describe_stats
 from .mesh import Mesh
 from .points import PointCloud
 from .texture import AnisoTexture
@@ -45,6 +46,12 @@ def add_render_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--fov", type=_fov, default=40.0, help="vertical field of view, degrees")
     p.add_argument("--camera-position", type=_vec3, default=None, metavar="X,Y,Z")
     p.add_argument("--camera-target", type=_vec3, default=None, metavar="X,Y,Z")
+    p.add_argument("--lod", action="store_true",
+                   help="splats and volume: draw from the texture's level-of-detail pyramid, "
+                        "per frame only as fine as the view needs")
+    p.add_argument("--pixel-error", type=positive_float, default=1.0,
+                   help="with --lod: the largest a drawn voxel may be on screen, in "
+                        "framebuffer pixels (--ssaa subdivides them)")
     p.add_argument("--backend", choices=("auto", "egl", "osmesa", "x11"), default="auto")
 
 
@@ -103,7 +110,10 @@ def render_options(args) -> dict:
 
 
 def draw_options(method: str, args) -> dict:
-    return {"splat": args.splat, "quality": args.quality} if method == "splat" else {}
+    opts = {"splat": args.splat, "quality": args.quality} if method == "splat" else {}
+    if getattr(args, "lod", False) and method in ("splat", "volume"):
+        opts.update(lod=True, pixel_error=args.pixel_error)
+    return opts
 
 
 def default_method(thing) -> str:
@@ -139,6 +149,8 @@ def cmd_render(args) -> int:
             r.render(thing, camera, method, ssaa=args.ssaa, **render_options(args), **draw_options(method, args))
             print(f"{method}: {args.size[0]}x{args.size[1]}, ssaa {args.ssaa}, "
                   f"frame {1000 * r.last_frame_seconds:.1f} ms on {r.gl.renderer}")  # fmt: skip
+            if r.last_lod_stats:
+                print(describe_stats(r.last_lod_stats))
     save_png(out, img)
     print(f"wrote {out}")
     return 0
@@ -170,12 +182,15 @@ def figure(r, thing, camera: Camera, args) -> tuple[np.ndarray, list[str]]:
         img = r.render(thing, camera, method, ssaa=ssaa, **opts)
         text = f"{names[method]}{', ' + str(ssaa) + ' spp' if method == 'mesh' and ssaa == 1 else ''}\n{ms:.0f} ms"
         row = f"{names[method]:<22} {ms:8.1f} ms"
+        lod_text = describe_stats(r.last_lod_stats)
         if truth is not None:
             from .metrics import psnr
 
             p = psnr(img, truth)
             text += f", PSNR {p:.1f} dB"
             row += f"  PSNR {p:6.2f} dB"
+        if lod_text:
+            row += f"  {lod_text}"
         panels.append(img)
         labels.append(text)
         rows.append(row)

@@ -51,6 +51,7 @@ blends overlapping splats of one surface into a continuous one.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 
 import moderngl
@@ -59,6 +60,7 @@ import numpy as np
 from .context import GLContext
 from .errors import InputError, ResourceError
 from .frame import FrameView
+from .lod import LodPoints, _ranges, select_voxels
 from .points import PointCloud
 
 SHAPES = ("square", "disc", "ellipse")
@@ -237,6 +239,37 @@ class GPUPoints:
 
 
 @dataclass(eq=False)
+class GPULodPoints(GPUPoints):
+    """Every level of a pyramid's points (:class:`~aniso3d.lod.LodPoints`)
+    uploaded once, one after the other in one buffer (finest level first),
+    each level's voxels in Morton order of their grid cells with every voxel's
+    points contiguous. A frame draws only the voxels
+    :func:`~aniso3d.lod.select_voxels` chooses, through an index buffer
+    rewritten per frame (4 bytes per point drawn), in ascending order.
+
+    ``bounds`` (and so the clip range) covers every level's points, whatever a
+    frame selects. Per level l: ``level_first[l]`` is its first point in the
+    buffer, ``rank[l]`` (M_l,) each voxel's place in Morton order and
+    ``run_first[l]``, ``run_count[l]`` (M_l,) the buffer range of the voxel
+    of each rank. ``last_stats`` is the last frame's selection (see
+    :meth:`SplatRenderer.draw`).
+    """
+
+    lod: LodPoints | None = None
+    level_first: np.ndarray | None = None
+    rank: list = field(default_factory=list)
+    run_first: list = field(default_factory=list)
+    run_count: list = field(default_factory=list)
+    level_bounds: np.ndarray | None = None  # (L, 2, 3) each level's point bounds
+    level_size: np.ndarray | None = None  # (L,) each level's largest sqrt(area)
+    index_buffer: moderngl.Buffer | None = None
+    indexed_vaos: dict = field(default_factory=dict)
+    drawn: np.ndarray | None = None  # this frame's indices (sorted uint32)
+    frame_box: tuple | None = None  # (bounds, largest size) of the levels drawn this frame
+    last_stats: dict = field(default_factory=dict)
+
+
+@dataclass(eq=False)
 class _Targets:
     """Offscreen buffers for one framebuffer size, made on first use: the depth
     texture (geometry pass of "fast", visibility pass of "high"), the point ids
@@ -277,6 +310,8 @@ class SplatRenderer:
         self._targets: dict[tuple[int, int], _Targets] = {}
         self._required: dict[int, frozenset[str]] = {}
         self._screen_vaos: dict[int, moderngl.VertexArray] = {}
+        #: The last pyramid frame's selection statistics (see :meth:`select`).
+        self.last_lod_stats: dict | None = None
         # Compile the default variant now so shader errors surface at once.
         self._program("geometry", "square", sprite=True)
 
@@ -306,8 +341,13 @@ class SplatRenderer:
         for name in required:
             prog[name].value = values[name]
 
-    def _vao(self, handle: GPUPoints, prog: moderngl.Program) -> moderngl.VertexArray:
-        vao = handle.vaos.get(id(prog))
+    def _vao(
+        self, handle: GPUPoints, prog: moderngl.Program, indexed: bool = False
+    ) -> moderngl.VertexArray:
+        """The points' vertex array for ``prog``; ``indexed``: through the
+        handle's index buffer (a pyramid upload)."""
+        cache = handle.indexed_vaos if indexed else handle.vaos
+        vao = cache.get(id(prog))
         if vao is None:
             if "in_position" not in prog:
                 raise ResourceError("splat vertex shader has no active in_position attribute")
@@ -318,10 +358,14 @@ class SplatRenderer:
                     names.append(name)
                 else:
                     fmt.append(f"{4 * k}x")
-            vao = self.gl.track(
-                self.gl.ctx.vertex_array(prog, [(handle.vbo, " ".join(fmt), *names)])
-            )
-            handle.vaos[id(prog)] = vao
+            content = [(handle.vbo, " ".join(fmt), *names)]
+            if indexed:
+                vao = self.gl.ctx.vertex_array(
+                    prog, content, index_buffer=handle.index_buffer, index_element_size=4
+                )
+            else:
+                vao = self.gl.ctx.vertex_array(prog, content)
+            vao = cache[id(prog)] = self.gl.track(vao)
         return vao
 
     def _screen(self, fragment: str) -> tuple[moderngl.Program, moderngl.VertexArray]:
@@ -334,33 +378,45 @@ class SplatRenderer:
 
     # -------------------------------------------------------------- upload
 
-    def upload(self, cloud: PointCloud) -> GPUPoints:
+    def upload(self, cloud: PointCloud | LodPoints) -> GPUPoints:
         """Upload ``cloud`` once: float64 positions minus the cloud's centre,
-        then float32, so far-off clouds keep their precision."""
+        then float32, so far-off clouds keep their precision.
+
+        A :class:`~aniso3d.lod.LodPoints` uploads every level of its pyramid
+        (:class:`GPULodPoints`); :meth:`draw` then selects per frame."""
+        if isinstance(cloud, LodPoints):
+            return self._upload_lod(cloud)
         if not isinstance(cloud, PointCloud):
             raise InputError(f"the splat renderer draws a PointCloud, got {type(cloud).__name__}")
         n = len(cloud)
         if n == 0:
             raise InputError("cannot draw an empty point cloud (it has no points)")
+        bounds = cloud.bounds
+        origin = 0.5 * (bounds[0] + bounds[1])
+        order = morton_order(cloud.positions - origin)
+        arrays = (cloud.positions, cloud.normals, cloud.areas, cloud.kd, cloud.ks, cloud.shininess)
+        return self._upload_arrays(GPUPoints, arrays, order, bounds, origin)
+
+    def _upload_arrays(self, cls, arrays, order, bounds, origin, **extra) -> GPUPoints:
+        """Upload the points ``order`` of ``arrays`` (positions, normals,
+        areas, kd, ks, shininess), in that order, relative to ``origin``."""
+        positions, normals, areas, kd, ks, shininess = arrays
+        n = len(order)
         rows = -(-n // ATTRIB_PER_ROW)
         if rows > self.gl.max_texture_size:
             raise ResourceError(
                 f"{n} points need a {2 * ATTRIB_PER_ROW}x{rows} attribute texture, above this "
                 f"OpenGL's limit of {self.gl.max_texture_size}; draw the cloud in parts"
             )
-        bounds = cloud.bounds
-        origin = 0.5 * (bounds[0] + bounds[1])
-        local = cloud.positions - origin
-        order = morton_order(local)
-        local = local[order]
-        size = np.sqrt(cloud.areas[order])
+        local = positions[order] - origin
+        size = np.sqrt(areas[order])
         data = np.empty((n, _FLOATS), dtype=np.float32)
         data[:, 0:3] = local
-        data[:, 3:6] = cloud.normals[order]
+        data[:, 3:6] = normals[order]
         data[:, 6] = size
-        data[:, 7:10] = cloud.kd[order]
-        data[:, 10] = cloud.ks[order]
-        data[:, 11] = cloud.shininess[order]
+        data[:, 7:10] = kd[order]
+        data[:, 10] = ks[order]
+        data[:, 11] = shininess[order]
         attrib = np.zeros((rows * ATTRIB_PER_ROW, 8), dtype=np.float32)
         attrib[:n, 0:3] = data[:, 3:6]
         attrib[:n, 3] = data[:, 10]
@@ -374,7 +430,7 @@ class SplatRenderer:
         tex.filter = moderngl.NEAREST, moderngl.NEAREST
         start = np.arange(0, n, BLOCK)
         count = np.minimum(BLOCK, n - start)
-        return GPUPoints(
+        return cls(
             vbo=vbo,
             attrib=tex,
             origin=origin,
@@ -386,11 +442,124 @@ class SplatRenderer:
             block_lo=np.minimum.reduceat(local, start, axis=0),
             block_hi=np.maximum.reduceat(local, start, axis=0),
             block_size=np.maximum.reduceat(size, start),
+            **extra,
         )
+
+    def _upload_lod(self, lod: LodPoints) -> GPULodPoints:
+        """Every level's points in one buffer: level by level, finest first,
+        voxels in Morton order of their cells, a voxel's points together."""
+        pyr = lod.pyramid
+        clouds, parts, rank, run_first, run_count, level_first = [], [], [], [], [], []
+        base = 0
+        for lvl in range(len(pyr)):
+            cloud, off = lod.level_cloud(lvl)
+            m = pyr[lvl].n_voxels
+            vorder = morton_order(pyr[lvl].coords) if m > 1 else np.arange(m)
+            counts = (off[vorder + 1] - off[vorder]).astype(np.int64)
+            r = np.empty(m, dtype=np.int64)
+            r[vorder] = np.arange(m)
+            clouds.append(cloud)
+            parts.append(base + _ranges(off[vorder], off[vorder + 1]))
+            rank.append(r)
+            run_first.append(base + np.cumsum(counts) - counts)
+            run_count.append(counts)
+            level_first.append(base)
+            base += len(cloud)
+        if len(clouds[0]) == 0:
+            raise InputError("cannot draw an empty point cloud (it has no points)")
+        if base >= 2**32:
+            raise ResourceError(f"{base} points in all levels are too many for 32-bit indices")
+        bounds = np.stack([
+            np.min([c.bounds[0] for c in clouds if len(c)], axis=0),
+            np.max([c.bounds[1] for c in clouds if len(c)], axis=0),
+        ])  # fmt: skip
+        b0 = clouds[0].bounds  # level 0 keeps the origin a plain upload of its points has
+        origin = 0.5 * (b0[0] + b0[1])
+        arrays = tuple(
+            np.concatenate([getattr(c, name) for c in clouds])
+            for name in ("positions", "normals", "areas", "kd", "ks", "shininess")
+        )
+        empty = np.full((2, 3), np.nan)
+        handle = self._upload_arrays(
+            GPULodPoints, arrays, np.concatenate(parts), bounds, origin,
+            lod=lod, level_first=np.asarray(level_first, dtype=np.int64),
+            rank=rank, run_first=run_first, run_count=run_count,
+            level_bounds=np.stack([c.bounds if len(c) else empty for c in clouds]),
+            level_size=np.array([np.sqrt(c.areas.max()) if len(c) else 0.0 for c in clouds]),
+        )  # fmt: skip
+        handle.index_buffer = self.gl.track(self.gl.ctx.buffer(reserve=4 * max(len(clouds[0]), 1)))
+        return handle
+
+    def select(self, handle: GPULodPoints, view: FrameView, pixel_error: float = 1.0) -> dict:
+        """This frame's points of a pyramid upload: :func:`~aniso3d.lod.select_voxels`
+        for the view's camera and framebuffer size (clip range ``view.near``
+        to ``view.far``), their buffer indices written to the index buffer.
+        Returns (and keeps as ``handle.last_stats`` and
+        :attr:`last_lod_stats`) the frame's statistics: ``points`` drawn,
+        ``points_per_level``, ``voxels_per_level``, ``culled`` (voxels found
+        outside the view, their subtrees skipped), ``culled_per_level``,
+        ``total_points`` (uploaded, all levels), ``select_ms`` (the voxel
+        walk), ``index_ms`` (indices made and written) and ``selection_ms``
+        (both)."""
+        pyr = handle.lod.pyramid
+        t0 = time.perf_counter()
+        sel = select_voxels(pyr, view.camera, view.size, pixel_error, near=view.near, far=view.far)
+        t1 = time.perf_counter()
+        firsts, counts, per_level = [], [], []
+        for lvl, vox in enumerate(sel.voxels):
+            if len(vox) == 0:
+                per_level.append(0)
+                continue
+            if len(vox) == len(handle.rank[lvl]):  # the whole level (a near view): one run
+                c = np.array([handle.run_count[lvl].sum()])
+                firsts.append(handle.level_first[lvl : lvl + 1])
+            else:
+                r = np.sort(handle.rank[lvl][vox])
+                c = handle.run_count[lvl][r]
+                firsts.append(handle.run_first[lvl][r])
+            counts.append(c)
+            per_level.append(int(c.sum()))
+        if firsts:
+            f, c = np.concatenate(firsts), np.concatenate(counts)
+            idx = _ranges(f, f + c).astype(np.uint32)
+        else:
+            idx = np.zeros(0, dtype=np.uint32)
+        buf = handle.index_buffer
+        if idx.nbytes > buf.size:
+            buf.orphan(max(idx.nbytes, 2 * buf.size))
+        if idx.nbytes:
+            buf.write(idx)
+        handle.drawn = idx
+        used = [lvl for lvl, n in enumerate(per_level) if n]
+        if used:
+            lb = handle.level_bounds[used]
+            box = np.stack([lb[:, 0].min(axis=0), lb[:, 1].max(axis=0)])
+            handle.frame_box = (box, float(handle.level_size[used].max()))
+        else:
+            handle.frame_box = None
+        t2 = time.perf_counter()
+        stats = {
+            "points": int(len(idx)),
+            "points_per_level": per_level,
+            "voxels_per_level": [int(len(v)) for v in sel.voxels],
+            "culled": int(sum(sel.culled)),
+            "culled_per_level": [int(c) for c in sel.culled],
+            "total_points": int(handle.n_points),
+            "level0_points": int(handle.level_first[1] if len(pyr) > 1 else handle.n_points),
+            "pixel_error": float(pixel_error),
+            "select_ms": 1000.0 * (t1 - t0),
+            "index_ms": 1000.0 * (t2 - t1),
+            "selection_ms": 1000.0 * (t2 - t0),
+        }
+        handle.last_stats = self.last_lod_stats = stats
+        return stats
 
     def release(self, handle: GPUPoints) -> None:
         self.gl.free(*handle.vaos.values(), handle.vbo, handle.attrib)
         handle.vaos.clear()
+        if isinstance(handle, GPULodPoints):
+            self.gl.free(*handle.indexed_vaos.values(), handle.index_buffer)
+            handle.indexed_vaos.clear()
 
     def release_all(self) -> None:
         """Free the offscreen buffers and full-screen pass objects."""
@@ -528,8 +697,11 @@ class SplatRenderer:
         Clears and full-screen passes are restricted to it."""
         w, h = view.size
         extent = shape_extent(opts["splat"], opts["size_factor"], opts["aspect"])
-        grow = float(handle.block_size.max()) * math.hypot(*extent)
-        lo, hi = handle.bounds[0] - handle.origin - grow, handle.bounds[1] - handle.origin + grow
+        bounds, largest = handle.bounds, float(handle.block_size.max())
+        if isinstance(handle, GPULodPoints) and handle.frame_box is not None:
+            bounds, largest = handle.frame_box  # the levels this frame draws
+        grow = largest * math.hypot(*extent)
+        lo, hi = bounds[0] - handle.origin - grow, bounds[1] - handle.origin + grow
         pick = np.array([[i & 1, i & 2, i & 4] for i in range(8)], bool)
         corners = np.where(pick, hi, lo) - np.asarray(view.eye_local(handle.origin))
         cam = view.camera
@@ -549,23 +721,48 @@ class SplatRenderer:
     def _splats(
         self, handle: GPUPoints, view: FrameView, opts: dict, kind: str, uniforms: dict
     ) -> None:
-        """One pass over the points: sprites, then the wide splats' quads."""
+        """One pass over the points: sprites, then the wide splats' quads. A
+        pyramid upload draws this frame's selection (``handle.drawn``)."""
+        indexed = isinstance(handle, GPULodPoints)
+        if indexed and not len(handle.drawn):
+            return
         prog = self._program(kind, opts["splat"], sprite=True)
         self._bind(prog, uniforms)
-        self._vao(handle, prog).render(moderngl.POINTS)
+        if indexed:
+            self._vao(handle, prog, True).render(moderngl.POINTS, vertices=len(handle.drawn))
+        else:
+            self._vao(handle, prog).render(moderngl.POINTS)
         ranges = self.large_blocks(handle, view, opts)
+        if indexed and ranges:
+            # Buffer ranges -> ranges of the (ascending) drawn indices.
+            lo = np.searchsorted(handle.drawn, [f for f, _ in ranges])
+            hi = np.searchsorted(handle.drawn, [f + c for f, c in ranges])
+            ranges = [(int(a), int(b - a)) for a, b in zip(lo, hi, strict=True) if b > a]
         if ranges:
             prog = self._program(kind, opts["splat"], sprite=False)
             self._bind(prog, uniforms)
-            vao = self._vao(handle, prog)
+            vao = self._vao(handle, prog, indexed)
             for first, count in ranges:
                 vao.render(moderngl.POINTS, vertices=count, first=first)
 
-    def draw(self, handle: GPUPoints, view: FrameView, fbo=None, **options) -> None:
+    def draw(
+        self, handle: GPUPoints, view: FrameView, fbo=None, pixel_error: float | None = None,
+        **options,
+    ) -> None:  # fmt: skip
         """Draw into ``fbo`` (bound, cleared to the background with alpha 0,
         viewport covering it); writes colour, alpha 1 where a splat landed
-        (coverage) and depth."""
+        (coverage) and depth.
+
+        A pyramid upload (:class:`GPULodPoints`) first selects this frame's
+        points (:meth:`select`) with the screen-space error ``pixel_error``
+        (framebuffer pixels, default 1), then draws only those."""
         opts = self.options(**options)
+        if isinstance(handle, GPULodPoints):
+            self.select(handle, view, 1.0 if pixel_error is None else pixel_error)
+        elif pixel_error is not None:
+            raise InputError(
+                "pixel_error applies to a level-of-detail upload only (upload a LodPoints)"
+            )
         ctx = self.gl.ctx
         target = fbo if fbo is not None else ctx.fbo
         viewport = ctx.viewport
@@ -628,7 +825,9 @@ class SplatRenderer:
         same on-screen boxes as the splats' sprites, straight into ``fbo``,
         with a flat-colour shader (no intersection, discard, lighting, depth
         writes from the fragment stage or second pass). Splats wider than
-        :attr:`max_sprite` are not drawn."""
+        :attr:`max_sprite` are not drawn. Not for pyramid uploads."""
+        if isinstance(handle, GPULodPoints):
+            raise InputError("the benchmark floor draws a plain point cloud, not a pyramid upload")
         opts = self.options(**options)
         ctx = self.gl.ctx
         ctx.enable(moderngl.DEPTH_TEST | moderngl.PROGRAM_POINT_SIZE)

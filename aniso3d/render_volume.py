@@ -70,6 +70,7 @@ from .context import GLContext
 from .errors import InputError, ResourceError
 from .frame import FrameView
 from .lighting import Lighting, shade_np
+from .lod import Pyramid, volume_level
 from .texture import AnisoTexture
 
 #: Brick edge in voxels of the two-level index.
@@ -416,8 +417,28 @@ class GPUVolume:
         return int(sum(self.sizes.values()))
 
 
+@dataclass(eq=False)
+class GPULodVolume:
+    """Every level of a texture pyramid uploaded once (``levels[l]``, a
+    :class:`GPUVolume` each); a frame ray-marches the one level
+    :func:`~aniso3d.lod.volume_level` picks. ``bounds`` covers every level's
+    grid, so the clip range does not depend on the level drawn.
+    ``last_stats`` is the last frame's choice."""
+
+    pyramid: Pyramid
+    levels: list[GPUVolume]
+    origin: np.ndarray
+    bounds: np.ndarray
+    last_stats: dict = field(default_factory=dict)
+
+    @property
+    def nbytes(self) -> int:
+        return int(sum(v.nbytes for v in self.levels))
+
+
 class VolumeRenderer:
-    """Ray-marches an :class:`~aniso3d.texture.AnisoTexture` (one ray per pixel)."""
+    """Ray-marches an :class:`~aniso3d.texture.AnisoTexture` (one ray per pixel),
+    or per frame one level of a :class:`~aniso3d.lod.Pyramid`."""
 
     method = "volume"
 
@@ -438,8 +459,23 @@ class VolumeRenderer:
         }
         self.prog = gl.program("volume.vert", "volume.frag", defines=defines)
         self.vao = gl.track(ctx.vertex_array(self.prog, []))
+        #: The last pyramid frame's level choice (see :func:`~aniso3d.lod.volume_level`).
+        self.last_lod_stats: dict | None = None
 
-    def upload(self, texture: AnisoTexture) -> GPUVolume:
+    def upload(self, texture: AnisoTexture | Pyramid) -> GPUVolume | GPULodVolume:
+        """Upload a texture, or every level of a pyramid (:class:`GPULodVolume`)."""
+        if isinstance(texture, Pyramid):
+            levels: list[GPUVolume] = []
+            try:
+                for tex in texture:
+                    levels.append(self.upload(tex))
+            except BaseException:
+                for handle in levels:
+                    self.release(handle)
+                raise
+            boxes = np.stack([tex.bounds for tex in texture])
+            bounds = np.stack([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)])
+            return GPULodVolume(texture, levels, 0.5 * (bounds[0] + bounds[1]), bounds)
         arrays = pack_volume(texture)
         for name, arr in arrays.items():
             if arr.nbytes > self.max_block:
@@ -486,6 +522,7 @@ class VolumeRenderer:
         density: str = "facet",
         normal: str = "mean",
         opacity: str = "exponential",
+        pixel_error: float | None = None,
         **unknown,
     ) -> None:
         """Draw into the bound framebuffer (cleared to the background, alpha 0).
@@ -494,12 +531,27 @@ class VolumeRenderer:
         ``density`` "facet" | "kernel" | "nearest" (how the density sphere is
         read), ``normal`` "mean" | "sample" (the shading normal of an entry),
         ``opacity`` "exponential" | "linear" (how coverage adds up along the
-        ray; see the module docstring).
+        ray; see the module docstring). A pyramid upload
+        (:class:`GPULodVolume`) draws the level :func:`~aniso3d.lod.volume_level`
+        picks for ``pixel_error`` (framebuffer pixels, default 1).
         """
         if unknown:
             raise InputError(
-                f"unknown volume option(s) {sorted(unknown)}; known: step, density, normal, opacity"
+                f"unknown volume option(s) {sorted(unknown)}; "
+                "known: step, density, normal, opacity, pixel_error"
             )
+        if isinstance(handle, GPULodVolume):
+            stats: dict = {}
+            level = volume_level(
+                handle.pyramid, view.camera, view.size,
+                1.0 if pixel_error is None else pixel_error,
+                near=view.near, far=view.far, stats=stats,
+            )  # fmt: skip
+            stats["selection_ms"] = 1000.0 * stats.pop("seconds")
+            handle.last_stats = self.last_lod_stats = stats
+            handle = handle.levels[level]
+        elif pixel_error is not None:
+            raise InputError("pixel_error applies to a pyramid upload only (upload a Pyramid)")
         _check_choice(step, STEPS, "volume step")
         _check_choice(density, DENSITY_MODES, "density reading")
         _check_choice(normal, NORMAL_MODES, "normal")
@@ -545,7 +597,11 @@ class VolumeRenderer:
         finally:
             ctx.depth_func = "<"
 
-    def release(self, handle: GPUVolume) -> None:
+    def release(self, handle: GPUVolume | GPULodVolume) -> None:
+        if isinstance(handle, GPULodVolume):
+            for level in handle.levels:
+                self.release(level)
+            return
         self.gl.free(*handle.buffers.values())
         handle.buffers.clear()
 

@@ -4,6 +4,14 @@
 cloud and returns an (H, W, 3) uint8 image (row 0 at the top). Conversions
 (mesh -> texture -> points) and GPU uploads happen once per thing and options,
 and are reused across frames.
+
+``lod=True`` (methods "splat" and "volume", a mesh or texture) draws from the
+texture's exact pyramid (:mod:`aniso3d.lod`), built and uploaded once: splats
+select per frame, per region, the coarsest level whose voxels cover at most
+``pixel_error`` framebuffer pixels and draw only those points; the volume
+renderer marches, per frame, the one level fine enough at the object's
+nearest visible depth. :attr:`Renderer.last_lod_stats` holds the frame's
+selection.
 """
 
 from __future__ import annotations
@@ -20,6 +28,7 @@ from .context import GLContext
 from .errors import InputError
 from .frame import FrameView
 from .lighting import Lighting
+from .lod import LodPoints, Pyramid, pyramid
 from .mesh import Mesh
 from .points import PointCloud
 from .texture import AnisoTexture, build_texture
@@ -79,7 +88,12 @@ class Renderer:
         self._converted: dict[tuple, tuple[object, object]] = {}
         self._uploads: dict[tuple, tuple[object, object]] = {}
         self._fbos: dict[tuple[int, int], moderngl.Framebuffer] = {}
+        self._pyramids: dict[int, tuple[AnisoTexture, Pyramid]] = {}
         self.last_frame_seconds = 0.0
+        #: Selection of the last ``lod=True`` frame (None after other frames):
+        #: for splats ``points`` drawn, ``points_per_level``, ``culled``
+        #: voxels, ``selection_ms``...; for the volume the ``level`` drawn.
+        self.last_lod_stats: dict | None = None
 
     # ----------------------------------------------------------- plumbing
 
@@ -126,10 +140,51 @@ class Renderer:
         if not isinstance(tex, AnisoTexture):
             raise InputError(f"cannot render a {type(thing).__name__}; pass a Mesh, AnisoTexture or PointCloud")
         out = tex
-        if method == "splat":
+        if method == "splat" and build["per_entry"] == "adaptive":  # counts per entry (lod.py)
+            opts = (build["placement"], "adaptive", build["point_normal"])
+            out = self.pyramid(tex).level_cloud(0, *opts)[0]
+        elif method == "splat":
             out = tex.to_points(build["placement"], build["per_entry"], build["point_normal"])
         self._converted[key] = (thing, out)
         return out
+
+    def pyramid(self, thing, **build) -> Pyramid:
+        """The texture pyramid of ``thing`` (a mesh is converted with the
+        build options ``resolution`` and ``directions`` first); built once
+        per texture."""
+        if isinstance(thing, PointCloud):
+            raise InputError(
+                "level of detail needs a mesh or a texture: a point cloud has no texture pyramid"
+            )
+        opts = {**DEFAULT_BUILD, **{k: v for k, v in build.items() if v is not None}}
+        tex = self._convert(thing, "volume", opts)
+        hit = self._pyramids.get(id(tex))
+        if hit is None or hit[0] is not tex:
+            hit = self._pyramids[id(tex)] = (tex, pyramid(tex))
+        return hit[1]
+
+    def _upload_lod(self, thing, method: str, build: dict):
+        """Upload (once) the pyramid of ``thing`` for ``method``."""
+        if method not in ("splat", "volume"):
+            raise InputError(
+                f"level of detail applies to the splat and volume methods, not '{method}'"
+            )
+        opts = {**DEFAULT_BUILD, **{k: v for k, v in build.items() if v is not None}}
+        unknown = set(opts) - set(BUILD_OPTIONS)
+        if unknown:
+            raise InputError(f"unknown build option(s) {sorted(unknown)}; known: {BUILD_OPTIONS}")
+        key = (id(thing), method, tuple(sorted(opts.items())) + (("lod", True),))
+        hit = self._uploads.get(key)
+        if hit is not None and hit[0] is thing:
+            return hit[1]
+        pyr = self.pyramid(thing, **opts)
+        if method == "splat":
+            data = LodPoints(pyr, opts["placement"], opts["per_entry"], opts["point_normal"])
+        else:
+            data = pyr
+        handle = self.method_renderer(method).upload(data)
+        self._uploads[key] = (thing, handle)
+        return handle
 
     def upload(self, thing, method: str, **build):
         """Convert and upload ``thing`` for ``method`` (cached); returns the handle."""
@@ -178,6 +233,13 @@ class Renderer:
         placement, per_entry, point_normal) choose the conversion; other
         options go to the method's renderer (e.g. ``splat="disc"``,
         ``quality="high"``).
+
+        ``lod=True`` (splat and volume, from a mesh or texture) draws from the
+        texture's pyramid with the screen-space error ``pixel_error``
+        (framebuffer pixels, default 1: with ``ssaa`` the selection is made
+        for the supersampled framebuffer); the clip range comes from every
+        level's bounds, not from what a frame selects. The frame's selection
+        is kept in :attr:`last_lod_stats`.
         """
         if not isinstance(camera, Camera):
             raise InputError(f"render needs an aniso3d.Camera, got {type(camera).__name__}")
@@ -195,7 +257,17 @@ class Renderer:
                 f"OpenGL's limit of {limit}; lower --ssaa or --size"
             )
         build = {k: options.pop(k) for k in list(options) if k in BUILD_OPTIONS}
-        handle = self.upload(thing, method, **build)
+        lod = options.pop("lod", False)
+        pixel_error = options.pop("pixel_error", None)
+        if lod:
+            handle = self._upload_lod(thing, method, build)
+            # Selected for the framebuffer (view.size): ssaa x ssaa samples per
+            # image pixel, so supersampling also selects finer levels.
+            options["pixel_error"] = 1.0 if pixel_error is None else pixel_error
+        elif pixel_error is not None:
+            raise InputError("pixel_error applies with lod=True only")
+        else:
+            handle = self.upload(thing, method, **build)
         impl = self.method_renderer(method)
         near, far = camera.clip_range(handle.bounds)
         view = FrameView(camera, self.lighting, (fw, fh), near, far, ssaa)
@@ -208,6 +280,7 @@ class Renderer:
         impl.draw(handle, view, fbo=fbo, **options)
         raw = fbo.read(components=4, dtype="f1")
         self.last_frame_seconds = time.perf_counter() - t0
+        self.last_lod_stats = dict(impl.last_lod_stats) if lod else None
         img = np.frombuffer(raw, dtype=np.uint8).reshape(fh, fw, 4)[::-1]
         if ssaa > 1:
             img = np.round(_downsample(img.astype(np.float32), ssaa)).astype(np.uint8)
@@ -256,6 +329,7 @@ class Renderer:
                 self._impl[method].release(handle)
         self._uploads.clear()
         self._converted.clear()
+        self._pyramids.clear()
         for method, impl in self._impl.items():
             rel = getattr(impl, "release_all", None)
             if rel:

@@ -49,6 +49,7 @@ import numpy as np
 
 from .camera import Camera
 from .errors import InputError, ResourceError
+from .lod import LodPoints, Pyramid, describe_stats, pyramid
 from .mesh import Mesh
 from .points import PointCloud
 from .texture import PLACEMENTS, AnisoTexture, build_texture
@@ -89,6 +90,7 @@ CONTROLS: tuple[tuple[str, str], ...] = (
     ("s", "splat shape"),
     ("h", "quality"),
     ("p", "point placement"),
+    ("l", "level of detail"),
     ("[ ] or - +", "voxels down/up"),
     ("c or F12", "screenshot"),
     ("o", "overlay"),
@@ -282,6 +284,7 @@ class Settings:
     directions: int = 64
     turntable: bool = False
     overlay: bool = True
+    lod: bool = False  # splats and volume from the texture's pyramid (aniso3d.lod)
 
 
 def _takes(impl, name: str) -> bool:
@@ -452,6 +455,11 @@ def _counts(data) -> str:
         return f"{_fmt_int(data.n_voxels)} voxels of {'x'.join(str(int(x)) for x in data.shape)}"
     if isinstance(data, PointCloud):
         return f"{_fmt_int(len(data))} points"
+    if isinstance(data, Pyramid):
+        return f"a pyramid of {len(data)} levels, {_counts(data[0])} at the finest"
+    if isinstance(data, LodPoints):
+        n = sum(len(data.level_cloud(lvl)[0]) for lvl in range(len(data.pyramid)))
+        return f"{_fmt_int(n)} points in {len(data.pyramid)} levels"
     return type(data).__name__
 
 
@@ -575,6 +583,7 @@ class Viewer:
             ((k.S,), lambda: self._set("splat", cycle(SPLATS, self.settings.splat))),
             ((k.H,), lambda: self._set("quality", cycle(QUALITIES, self.settings.quality))),
             ((k.P,), self.next_placement),
+            ((k.L,), self.toggle_lod),
             ((k.BRACKETLEFT, k.MINUS, k.NUM_SUBTRACT), lambda: self.step_resolution(-1)),
             ((k.BRACKETRIGHT, k.EQUAL, k.PLUS, k.NUM_ADD), lambda: self.step_resolution(1)),
             ((k.R,), self.reset_view),
@@ -661,6 +670,15 @@ class Viewer:
             return
         self._set("placement", cycle(PLACEMENTS, self.settings.placement))
 
+    def toggle_lod(self) -> None:
+        if self.kind == "points":
+            self._notify("level of detail needs a texture: the input is a point cloud", YELLOW)
+            return
+        self._set("lod", not self.settings.lod)
+        if self.settings.method == "mesh":
+            state = "on" if self.settings.lod else "off"
+            self._notify(f"level of detail {state}: it applies to the volume and splats", YELLOW)
+
     def step_resolution(self, step: int) -> None:
         if self.kind != "mesh":
             what = "saved texture" if self.kind == "texture" else "point cloud"
@@ -711,6 +729,9 @@ class Viewer:
             else ("points", self._texture_key(), self.settings.placement)
         )
 
+    def _lod(self) -> bool:
+        return self.settings.lod and self.kind != "points"
+
     def requirement(self, method: str) -> tuple[tuple | None, str | None]:
         """(data key ``method`` draws, None), or (None, why it cannot draw this input)."""
         if method == "mesh":
@@ -724,7 +745,9 @@ class Viewer:
                     None,
                     "the volume renderer needs an anisotropic texture: a point cloud has none",
                 )
-            return self._texture_key(), None
+            return (("pyramid", self._texture_key()) if self._lod() else self._texture_key()), None
+        if self._lod():
+            return ("lod points", self._texture_key(), self.settings.placement), None
         return self._points_key(), None
 
     def _lookup(self, key: tuple):
@@ -736,6 +759,10 @@ class Viewer:
         return value
 
     def _describe_key(self, key: tuple) -> str:
+        if key[0] == "pyramid":
+            return f"pyramid of the {self._describe_key(key[1])}"
+        if key[0] == "lod points":
+            return f"level-of-detail points ({key[2]}) of the {self._describe_key(key[1])}"
         if key[0] == "texture" and len(key) == 3:
             return f"texture {key[1]}³ (K={key[2]})"
         if key[0] == "points" and len(key) == 3:
@@ -744,6 +771,25 @@ class Viewer:
 
     def _job(self, key: tuple) -> Callable[[Callable], dict]:
         mesh = self.thing
+        if key[0] in ("pyramid", "lod points"):
+            tkey = key[1]
+            tex = self._lookup(tkey)
+            pyr = self._lookup(("pyramid", tkey))
+
+            def levels(progress):
+                t = tex
+                if t is None:
+                    t = build_texture(mesh, tkey[1], tkey[2], progress=progress)
+                progress(1.0, "pyramid")
+                p = pyr if pyr is not None else pyramid(t)
+                out = {tkey: t, ("pyramid", tkey): p}
+                if key[0] == "lod points":
+                    lp = out[key] = LodPoints(p, key[2])
+                    for lvl in range(len(p)):  # the level point sets, off the main thread
+                        lp.level_cloud(lvl)
+                return out
+
+            return levels
         if key[0] == "texture":
             _, res, k = key
             return lambda progress: {key: build_texture(mesh, res, k, progress=progress)}
@@ -765,6 +811,8 @@ class Viewer:
         a switch of renderer finds them ready."""
         method_key, _ = self.requirement(self.settings.method)
         wanted = [method_key]
+        if self._lod() and method_key is not None and method_key[0] != "mesh":
+            wanted += [self.requirement(m)[0] for m in ("volume", "splat")]
         if self.kind == "mesh":
             wanted += [self._texture_key(), self._points_key()]
         elif self.kind == "texture":
@@ -984,6 +1032,8 @@ class Viewer:
                 parts.append(f"placement {s.placement}")
         if s.method != "mesh" and self.kind != "points":
             parts.append(f"voxels {s.resolution}³ K={s.directions}")
+            if s.lod:
+                parts.append("level of detail")
         return ", ".join(parts)
 
     # ------------------------------------------------------------ overlay
@@ -1043,6 +1093,9 @@ class Viewer:
         if f.shown is not None:
             old = " (previous settings)" if f.state == "stale" else ""
             lines.append((f"drawing {f.shown.counts}{old}", WHITE))
+            lod = describe_stats(getattr(f.shown.handle, "last_stats", None))
+            if lod:
+                lines.append((lod, WHITE))
         if self.builder.busy:
             lines.append((self._building_text(), YELLOW))
         text, until, color = self._notice
