@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 from .errors import Aniso3DError, InputError
+from .texture import DEFAULT_DIRECTIONS, DEFAULT_RESOLUTION
 
 TEXTURE_SUFFIX = ".a3d"
 
@@ -224,8 +225,8 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("build", help="mesh -> anisotropic 3D texture (.a3d) or points (.ply)")
     b.add_argument("mesh", nargs="?", default=None, help="mesh file (default: the built-in tree)")
     b.add_argument("-o", "--output", default="tree.a3d", help="output .a3d texture or .ply points")
-    b.add_argument("--resolution", "-r", type=positive_int, default=128, help="voxels along the longest axis")
-    b.add_argument("--directions", "-k", type=positive_int, default=64, help="sphere sample directions K")
+    b.add_argument("--resolution", "-r", type=positive_int, default=DEFAULT_RESOLUTION, help="voxels along the longest axis")
+    b.add_argument("--directions", "-k", type=positive_int, default=DEFAULT_DIRECTIONS, help="sphere sample directions K")
     b.add_argument("--direction-set", choices=("fibonacci", "random"), default="fibonacci")
     b.add_argument("--seed", type=int, default=0, help="seed of the random direction set")
     b.add_argument("--placement", choices=("centroid", "center", "sphere"), default="centroid")

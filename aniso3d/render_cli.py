@@ -20,7 +20,7 @@ from .errors import InputError
 from .lod import describe_stats
 from .mesh import Mesh
 from .points import PointCloud
-from .texture import AnisoTexture
+from .texture import DEFAULT_DIRECTIONS, DEFAULT_RESOLUTION, AnisoTexture
 
 PANEL_METHODS = ("mesh", "volume", "splat")
 
@@ -33,8 +33,8 @@ def add_render_options(p: argparse.ArgumentParser) -> None:
                    help="supersampling factor per axis (1 = one sample per pixel)")
     p.add_argument("--gt-ssaa", type=positive_int, default=4,
                    help="supersampling of the polygon ground truth errors are measured against")
-    p.add_argument("--resolution", "-r", type=positive_int, default=128, help="voxels along the longest axis")
-    p.add_argument("--directions", "-k", type=positive_int, default=64, help="sphere sample directions K")
+    p.add_argument("--resolution", "-r", type=positive_int, default=DEFAULT_RESOLUTION, help="voxels along the longest axis")
+    p.add_argument("--directions", "-k", type=positive_int, default=DEFAULT_DIRECTIONS, help="sphere sample directions K")
     p.add_argument("--placement", choices=("centroid", "center", "sphere"), default="centroid")
     p.add_argument("--points-per-entry", type=positive_int, default=1)
     p.add_argument("--splat", choices=("square", "disc", "ellipse"), default="disc")

@@ -31,13 +31,13 @@ from .lighting import Lighting
 from .lod import LodPoints, Pyramid, pyramid
 from .mesh import Mesh
 from .points import PointCloud
-from .texture import AnisoTexture, build_texture
+from .texture import DEFAULT_DIRECTIONS, DEFAULT_RESOLUTION, AnisoTexture, build_texture
 
 METHODS = ("mesh", "volume", "splat")
 
 #: Options that change how a thing is converted (and so key the upload cache).
 BUILD_OPTIONS = ("resolution", "directions", "placement", "per_entry", "point_normal")
-DEFAULT_BUILD = {"resolution": 128, "directions": 64, "placement": "centroid", "per_entry": 1,
+DEFAULT_BUILD = {"resolution": DEFAULT_RESOLUTION, "directions": DEFAULT_DIRECTIONS, "placement": "centroid", "per_entry": 1,
                  "point_normal": "mean"}  # fmt: skip
 
 

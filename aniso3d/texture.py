@@ -37,6 +37,12 @@ from .mesh import Mesh, check_readable_file
 from .points import PointCloud
 from .util import atomic_write
 
+#: Defaults chosen by measurement (docs/bench/report.md): K = 16 is as
+#: accurate as 64 or 256 for the volume and splat renderers (both read the
+#: entries' own normals and areas) at half the bytes of K = 64.
+DEFAULT_RESOLUTION = 128
+DEFAULT_DIRECTIONS = 16
+
 FORMAT_NAME = "aniso3d-texture"
 FORMAT_VERSION = 1
 DIRECTION_SETS = ("fibonacci", "random")
@@ -451,8 +457,8 @@ def _gib(n: float) -> str:
 
 def build_texture(
     mesh: Mesh,
-    resolution: int = 128,
-    directions: int = 64,
+    resolution: int = DEFAULT_RESOLUTION,
+    directions: int = DEFAULT_DIRECTIONS,
     *,
     direction_set: str = "fibonacci",
     seed: int = 0,

@@ -52,7 +52,7 @@ from .errors import InputError, ResourceError
 from .lod import LodPoints, Pyramid, describe_stats, pyramid
 from .mesh import Mesh
 from .points import PointCloud
-from .texture import PLACEMENTS, AnisoTexture, build_texture
+from .texture import DEFAULT_DIRECTIONS, PLACEMENTS, AnisoTexture, build_texture
 
 METHODS = ("mesh", "volume", "splat")
 METHOD_LABELS = {"mesh": "polygons", "volume": "volume", "splat": "splats"}
@@ -281,7 +281,7 @@ class Settings:
     quality: str = "fast"
     placement: str = "centroid"
     resolution: int = DEFAULT_RESOLUTION
-    directions: int = 64
+    directions: int = DEFAULT_DIRECTIONS
     turntable: bool = False
     overlay: bool = True
     lod: bool = False  # splats and volume from the texture's pyramid (aniso3d.lod)

@@ -16,6 +16,7 @@ METHOD_CHOICES = ("mesh", "volume", "splat")
 
 
 def register(sub) -> None:
+    from .texture import DEFAULT_DIRECTIONS
     from .viewer import CONTROLS, DEFAULT_RESOLUTION, QUALITIES, SPLATS
 
     keys = "\n".join(f"  {k:<20}{a}" for k, a in CONTROLS)
@@ -39,7 +40,8 @@ def register(sub) -> None:
     p.add_argument("--resolution", "-r", type=positive_int, default=DEFAULT_RESOLUTION,
                    help="voxels along the longest axis when a mesh is converted")  # fmt: skip
     p.add_argument(
-        "--directions", "-k", type=positive_int, default=64, help="sphere sample directions K"
+        "--directions", "-k", type=positive_int, default=DEFAULT_DIRECTIONS,
+        help="sphere sample directions K"
     )
     p.add_argument("--placement", choices=("centroid", "center", "sphere"), default="centroid")
     p.add_argument("--splat", choices=SPLATS, default="disc")
