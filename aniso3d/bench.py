@@ -401,6 +401,11 @@ def plan_cases(settings: Settings, cameras: list[CameraSpec]) -> dict[Case, list
             add(Case(MESH_LABEL.get(s, f"mesh-{s}x{s}"), "mesh", cam.label, ssaa=s), "grid")
         add(_volume_case(cam.label, base), "grid")
         add(_splat_case(cam.label, base), "grid")
+        # The same two drawn from the texture's pyramid (issue 7): only what
+        # the view needs, a voxel per pixel.
+        lod = (("lod", True),)
+        add(replace(_volume_case(cam.label, base), extra=lod), "lod")
+        add(replace(_splat_case(cam.label, base), extra=lod), "lod")
     values = {
         "resolution": settings.resolutions,
         "directions": settings.directions,
@@ -1560,6 +1565,41 @@ def make_report(result: BenchResult, plots: list[str], notes: list[str]) -> str:
             body,
         )
         L += _axis_reading(sel, fieldname, err) + [""]
+
+    # ---- level of detail
+    lod_rows = [r for r in rows if in_block(r, "lod")]
+    if lod_rows:
+        L += [
+            "## Level of detail",
+            "",
+            "The baseline volume and splats drawn from the texture's exact pyramid "
+            "(`lod=True`, one voxel per pixel): splats take, per region, the coarsest level "
+            "whose voxels cover at most a pixel, and skip what is outside the view; the "
+            "volume marches the one level fine enough at the object's nearest depth. "
+            "Each against the same renderer on the single finest level.",
+            "",
+        ]
+        body = []
+        for cam in cams:
+            for method in ("splat", "volume"):
+                single = next((r for r in rows if in_block(r, "grid") and r["camera"] == cam["label"]
+                               and r["method"] == method), None)  # fmt: skip
+                lod = next((r for r in lod_rows if r["camera"] == cam["label"]
+                            and r["method"] == method), None)  # fmt: skip
+                if single is None or lod is None:
+                    continue
+                if method == "splat":
+                    drawn = (f"{_fmt(lod.get('lod_points'), ',.0f')} of "
+                             f"{_fmt(single.get('n_points'), ',.0f')} points")  # fmt: skip
+                else:
+                    drawn = f"level {lod.get('lod_level', '?')}"
+                pairs = zip(_metrics_cells(single), _metrics_cells(lod), strict=True)
+                body.append([cam["label"], method, drawn] + [f"{a} / {b}" for a, b in pairs])
+        L += _table(
+            ["camera", "renderer", "LOD draws", "PSNR dB", "SSIM", err, "coverage", "frame ms"],
+            body,
+        )
+        L += ["", "Cells read *single level / LOD*.", ""]
 
     # ---- recommendation
     rec = recommend(rows)

@@ -54,6 +54,12 @@ def test_plan_is_one_axis_at_a_time_plus_the_grid():
     plan = bench.plan_cases(settings, cams)
     grid = [c for c, blocks in plan.items() if "grid" in blocks]
     assert len(grid) == len(cams) * 5
+    # The level-of-detail block: the baseline volume and splats at every camera.
+    lod = [c for c, blocks in plan.items() if blocks == ["lod"]]
+    assert len(lod) == len(cams) * 2 and all(c.lod for c in lod)
+    assert {(c.method, c.camera) for c in lod} == {
+        (m, c.label) for m in ("volume", "splat") for c in cams
+    }
     near, far = bench.near_far(cams)
     base = settings.baseline
     for case, blocks in plan.items():
@@ -65,7 +71,7 @@ def test_plan_is_one_axis_at_a_time_plus_the_grid():
             if getattr(case, f) is not None and getattr(case, f) != base[a]
         ]  # fmt: skip
         assert len(differs) <= 1, (case, differs)
-        if "grid" not in blocks:
+        if "grid" not in blocks and "lod" not in blocks:
             assert case.camera in (near.label, far.label)
     # The baseline splat at the near camera serves every block.
     baseline_splat = next(c for c, b in plan.items() if c.method == "splat" and len(b) > 5)
@@ -217,8 +223,12 @@ def test_bench_smoke_end_to_end(gl_available, tmp_path, capsys):
         assert float(r["mesh_bytes"]) > 0 and int(r["n_triangles"]) > 0
         if r["method"] != "mesh":
             assert float(r["texture_bytes"]) > 0 and float(r["build_s"]) > 0
-        if r["method"] == "splat":
+        if r["method"] == "splat" and str(r["lod"]).lower() != "true":
             assert float(r["points_bytes"]) == 48 * int(r["n_points"])
+        if str(r["lod"]).lower() == "true" and r["status"] == "ok":
+            # What the renderer drew from the pyramid is recorded.
+            key = "lod_points" if r["method"] == "splat" else "lod_level"
+            assert r[key] != "" and float(r[key]) >= 0
     for r in measured:
         for key in (
             "frame_s",
@@ -257,7 +267,9 @@ def test_unavailable_renderer_is_recorded_as_skipped(gl_available, tmp_path, mon
     splat = [r for r in result.rows if r["method"] == "splat"]
     assert splat and all(r["status"] == "skipped" and "render_splat" in r["reason"] for r in splat)
     assert all(r["status"] == "ok" for r in result.rows if r["method"] != "splat")
-    assert all(r["points_bytes"] > 0 for r in splat)  # built and counted even when not drawn
+    # Built and counted even when not drawn (level-of-detail points are made by
+    # the renderer, so they have no separate point set).
+    assert all(r["points_bytes"] > 0 for r in splat if not r.get("lod"))
     out = tmp_path / "out"
     out.mkdir()
     bench.write_outputs(result, out)
