@@ -131,7 +131,7 @@ def test_recommend_prefers_cheaper_values_only_within_tolerance():
 def test_case_render_options():
     base = bench.PRESETS["full"].baseline
     splat = bench._splat_case("fill", base)
-    assert splat.render_options() == {"splat": "square", "quality": "fast"}
+    assert splat.render_options() == {"splat": base["splat"], "quality": "fast"}
     assert splat.points_key is not None
     vol = bench._volume_case("fill", base)
     assert vol.render_options() == {"normal": "mean"}
@@ -139,7 +139,7 @@ def test_case_render_options():
     lod = replace(splat, extra=(("lod", True), ("pixel_error", 2.0)))
     assert lod.lod and lod.points_key is None
     assert lod.render_options() == {
-        "splat": "square", "quality": "fast", "placement": "centroid", "per_entry": 1,
+        "splat": base["splat"], "quality": "fast", "placement": "centroid", "per_entry": 1,
         "point_normal": "mean", "lod": True, "pixel_error": 2.0,
     }  # fmt: skip
     quick = bench.PRESETS["quick"]
