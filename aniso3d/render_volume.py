@@ -1,9 +1,11 @@
 """Renderer (b): ray marching of the sparse anisotropic 3D texture (paper section 4 (b)).
 
 One ray per pixel (``shaders/volume.frag``), from the near plane, clipped to
-the grid's box. A two-level 3D DDA (Amanatides-Woo over 8^3 bricks, then over
-the voxels of occupied bricks) gives each voxel's exact chord, so nothing
-depends on a step size and an empty brick costs one lookup.
+the grid's box. Rays start from a base point near the grid computed in
+float64 (:func:`ray_base`), never from the eye's float32 position, so a
+camera 1e7 radii away loses nothing. A two-level 3D DDA (Amanatides-Woo over
+8^3 bricks, then over the voxels of occupied bricks) gives each voxel's exact
+chord, so nothing depends on a step size and an empty brick costs one lookup.
 
 A voxel seen along the unit ray direction w (METHOD.md "Reference
 conventions"), with ``P(w) = |wx| + |wy| + |wz|`` and h the voxel edge:
@@ -398,7 +400,7 @@ def pack_volume(texture: AnisoTexture) -> dict[str, np.ndarray]:
 class GPUVolume:
     """A texture uploaded once: six shader storage buffers (bindings 0-5, in
     the order of :func:`pack_volume`) and the grid's geometry. ``origin`` is
-    the grid centre, the local frame of the depth matrix."""
+    the grid centre."""
 
     buffers: dict[str, moderngl.Buffer]
     origin: np.ndarray
@@ -559,8 +561,7 @@ class VolumeRenderer:
         cam = view.camera
         right, up, forward = cam.basis()
         t = float(np.tan(np.radians(cam.fov) / 2))
-        h = handle.voxel_size
-        eye_g = (np.asarray(cam.position, dtype=np.float64) - handle.grid_origin) / h
+        rays = ray_base(handle, cam.position, forward, view.near, view.far)
         GLContext.set_uniforms(
             self.prog,
             {
@@ -569,14 +570,10 @@ class VolumeRenderer:
                 "u_right": tuple(map(float, right)),
                 "u_up": tuple(map(float, up)),
                 "u_tan": (t * view.aspect, t),
-                "u_eye_g": tuple(map(float, eye_g)),
-                "u_h": h,
-                "u_near": float(view.near),
-                "u_far": float(view.far),
+                **rays,
                 "u_shape": tuple(int(s) for s in handle.shape),
                 "u_bricks": tuple(int(s) for s in handle.bricks),
                 "u_center_g": tuple(float(s) / 2 for s in handle.shape),
-                "u_mvp": view.mvp(handle.origin),
                 "u_num_dirs": int(handle.n_directions),
                 "u_density_mode": DENSITY_MODES.index(density),
                 "u_normal_mode": NORMAL_MODES.index(normal),
@@ -609,6 +606,47 @@ class VolumeRenderer:
         """Free the renderer's own GPU objects (the programs stay cached in the context)."""
         self.gl.free(self.vao)
         self.vao = None
+
+
+def ray_base(
+    handle: GPUVolume, eye, forward, near: float, far: float
+) -> dict[str, float | tuple[float, float, float]]:
+    """The float64 part of volume.frag's rays, as its uniforms.
+
+    A pixel's ray is ``eye + s (forward + lat)``, s the distance along the
+    view axis and ``lat`` the pixel's offset on the plane ``s = 1`` (normal
+    to the axis). Rebuilding it in float32 from the eye's grid coordinates
+    loses ``|eye| * 6e-8`` voxels, 8 voxels at 1e8 voxels away. Instead the
+    eye is moved here, in float64, by ``s_b`` along the axis to the depth of
+    the near side of the grid's bounding sphere (``s_b = 0``, the eye itself,
+    when the eye is that near or the grid behind it): the base ``b``,
+    ``u_base_c`` in grid coordinates relative to the grid centre. Each pixel
+    starts its ray where it crosses the base's plane, ``b + s_b lat``, and
+    measures its parameter from there; the near and far planes are passed as
+    distances from that plane (``u_near_b``, ``u_far_b``, voxel units) and the
+    depth is rebuilt from them (``u_depth_k = far / (far - near)``).
+
+    Every float32 quantity of a ray that meets the grid is then of the order
+    of the grid size plus its offset from the view axis at its depth (which
+    float32 holds to ~1e-7 of the half-view width there, far below a pixel),
+    whatever the eye's distance. Clipping to the near plane stays exact: the
+    ray starts at ``u_near_b / cos`` from its origin, before it (negative)
+    when the base lies past the near plane.
+    """
+    h = handle.voxel_size
+    center_g = np.asarray(handle.shape, dtype=np.float64) / 2
+    f = np.asarray(forward, dtype=np.float64)
+    eye_c = (np.asarray(eye, dtype=np.float64) - handle.grid_origin) / h - center_g
+    radius = float(np.linalg.norm(center_g))
+    s_b = max(0.0, float(-eye_c @ f) - radius)
+    near_b, far_b = float(near) / h - s_b, float(far) / h - s_b
+    return {
+        "u_base_c": tuple(float(x) for x in eye_c + s_b * f),
+        "u_base_s": s_b,
+        "u_near_b": near_b,
+        "u_far_b": far_b,
+        "u_depth_k": float(far) / (float(far) - float(near)),
+    }
 
 
 def _check_choice(value, choices: tuple[str, ...], what: str) -> None:

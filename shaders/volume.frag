@@ -5,13 +5,17 @@
 //
 // In (uniforms): camera basis u_forward/u_right/u_up (world, unit) with
 // u_tan = (tan(fov/2) * aspect, tan(fov/2)); u_size framebuffer pixels;
-// u_eye_g eye in grid coordinates (voxel units, grid minimum corner at 0);
-// u_h voxel edge (world); u_near/u_far clip distances along u_forward (world);
-// u_shape grid cells, u_bricks brick cells; u_center_g grid centre (grid
-// coords); u_mvp clip <- local (local = world - grid centre) for depth;
-// u_num_dirs K; u_density_mode 0 facet / 1 kernel / 2 nearest; u_normal_mode
-// 0 mean / 1 sample; u_opacity_mode 0 exponential / 1 linear; u_background
-// RGB; the lighting uniforms of lighting.glsl.
+// u_base_c the ray base point: the eye moved u_base_s (voxel units) along
+// u_forward, in grid coordinates relative to the grid centre (the CPU puts
+// it at the near side of the grid's bounding sphere, or at the eye when the
+// eye is that close, so it is of the order of the grid size however far the
+// eye is); u_near_b/u_far_b the near/far planes' distances along u_forward
+// from the base (voxel units, may be negative); u_depth_k = far / (far -
+// near); u_shape grid cells, u_bricks brick cells; u_center_g grid centre
+// (grid coords, minimum corner at 0); u_num_dirs K; u_density_mode 0 facet /
+// 1 kernel / 2 nearest; u_normal_mode 0 mean / 1 sample; u_opacity_mode 0
+// exponential / 1 linear; u_background RGB; the lighting uniforms of
+// lighting.glsl.
 // In (SSBOs, laid out by aniso3d/render_volume.py:pack_volume):
 //   0 top[]      int, brick id of each brick cell or -1 (x fastest)
 //   1 pool[]     int, voxel index of each cell of each brick or -1
@@ -34,14 +38,14 @@ uniform vec3 u_forward;
 uniform vec3 u_right;
 uniform vec3 u_up;
 uniform vec2 u_tan;
-uniform vec3 u_eye_g;
-uniform float u_h;
-uniform float u_near;
-uniform float u_far;
+uniform vec3 u_base_c;
+uniform float u_base_s;
+uniform float u_near_b;
+uniform float u_far_b;
+uniform float u_depth_k;
 uniform ivec3 u_shape;
 uniform ivec3 u_bricks;
 uniform vec3 u_center_g;
-uniform mat4 u_mvp;
 uniform int u_num_dirs;
 uniform int u_density_mode;
 uniform int u_normal_mode;
@@ -65,7 +69,8 @@ vec4 g_nbw;        // their interpolation weights (sum 1)
 mat4x3 g_nbdir;    // their directions, as columns
 vec3 g_color;      // premultiplied colour so far
 float g_trans;     // transmittance so far
-float g_t50;       // ray parameter (grid units) where 1 - T reached 0.5, or -1
+float g_t50;       // ray parameter (grid units, from o) where 1 - T reached 0.5
+bool g_has50;      // whether it did (t can be negative: o may lie past near)
 
 float density_at(int v, int p) {
     int i = v * u_num_dirs + p;
@@ -166,12 +171,13 @@ void composite(int v, float t0, float chord) {
     if (!(seg > 0.0)) return;
     vec3 color = sum_w > 1e-7 * sum_a ? col_w / sum_w : (sum_a > 0.0 ? col_a / sum_a : vec3(0.0));
     float t_after = g_trans - seg;
-    if (g_t50 < 0.0 && t_after <= 0.5) {
+    if (!g_has50 && t_after <= 0.5) {
         float dt = 0.0;
         if (g_trans > 0.5) {
             dt = u_opacity_mode == 0 ? log(g_trans / 0.5) / sigma : (g_trans - 0.5) / sigma;
         }
         g_t50 = t0 + dt;
+        g_has50 = true;
     }
     g_color += seg * color;
     g_trans = t_after;
@@ -207,16 +213,25 @@ int min_axis(vec3 tm) {
 
 void main() {
     vec2 ndc = gl_FragCoord.xy / u_size * 2.0 - 1.0;
-    g_d = normalize(u_forward + ndc.x * u_tan.x * u_right + ndc.y * u_tan.y * u_up);
+    // The pixel's ray is eye + s * (forward + lat), s the distance along
+    // forward. Its origin o is where it crosses the base's plane (s =
+    // u_base_s): the base plus the lateral offset u_base_s * lat, which is
+    // of the order of the grid size for every ray that can meet the grid.
+    // Nothing here holds the eye's own (possibly huge) position, so float32
+    // keeps a fraction of a voxel however far the eye is; the direction's
+    // float32 error only acts over the ray's length inside the grid.
+    vec3 lat = ndc.x * u_tan.x * u_right + ndc.y * u_tan.y * u_up;
+    g_d = normalize(u_forward + lat);
     // Axis components this small cross no cell boundary inside any grid.
     g_d = mix(g_d, vec3(0.0), lessThan(abs(g_d), vec3(1e-12)));
     g_p = abs(g_d.x) + abs(g_d.y) + abs(g_d.z);
-    vec3 o = u_eye_g;
+    vec3 o = u_center_g + u_base_c + u_base_s * lat;
 
-    // Ray parameter range (grid units): the grid's box, then near/far.
+    // Ray parameter t (grid units from o) range: the grid's box, then
+    // near/far. A point at t lies u_base_s + t * cos_f along forward.
     float cos_f = dot(g_d, u_forward);
-    float t0 = u_near / (u_h * cos_f);
-    float t1 = u_far / (u_h * cos_f);
+    float t0 = u_near_b / cos_f;
+    float t1 = u_far_b / cos_f;
     vec3 hi = vec3(u_shape);
     for (int a = 0; a < 3; ++a) {
         if (g_d[a] == 0.0) {
@@ -233,7 +248,8 @@ void main() {
     neighbours(g_d);
     g_color = vec3(0.0);
     g_trans = 1.0;
-    g_t50 = -1.0;
+    g_t50 = 0.0;
+    g_has50 = false;
 
     ivec3 bcell, bstep, cell, stp;
     vec3 btmax, btdelta, tmax, tdelta;
@@ -275,11 +291,13 @@ void main() {
 
     vec3 rgb = clamp(g_color + g_trans * u_background, 0.0, 1.0);
     f_color = vec4(rgb, clamp(1.0 - g_trans, 0.0, 1.0));
+    // The perspective projection's window depth of a point at distance s
+    // along forward, far (s - near) / (s (far - near)), with s - near taken
+    // from the base (both terms small), not as a difference of large numbers.
     float depth = 1.0;
-    if (g_t50 >= 0.0) {
-        vec3 p_local = (o + g_d * g_t50 - u_center_g) * u_h;
-        vec4 clip = u_mvp * vec4(p_local, 1.0);
-        depth = clamp(clip.z / clip.w * 0.5 + 0.5, 0.0, 1.0);
+    if (g_has50) {
+        float sb = g_t50 * cos_f;  // distance along forward beyond the base
+        depth = clamp(u_depth_k * (sb - u_near_b) / (u_base_s + sb), 0.0, 1.0);
     }
     gl_FragDepth = depth;
 }

@@ -653,11 +653,7 @@ def _far_cases():
     cases = []
     for method in METHODS:
         for distance in (1e4, 1e5, 1e7):
-            marks = []
-            if method == "volume" and distance >= 1e7:
-                why = "render_volume rebuilds rays from the eye in float32; the object vanishes"
-                marks = [pytest.mark.xfail(strict=True, reason=why + " (reported)")]
-            cases.append(pytest.param(method, distance, marks=marks, id=f"{method}-{distance:g}"))
+            cases.append(pytest.param(method, distance, id=f"{method}-{distance:g}"))
     return cases
 
 
