@@ -18,23 +18,13 @@ import pytest
 from test_viewer import Session, drawn, mean_diff, xserver  # noqa: F401
 
 import aniso3d
-from aniso3d import InputError, ResourceError
+from aniso3d import InputError
 from aniso3d.camera import Camera, turntable
 from aniso3d.lod import LodPoints, describe_stats, pyramid
 from aniso3d.metrics import psnr, ssim
-from aniso3d.renderer import Renderer
 
 SIZE = (128, 128)
 
-
-@pytest.fixture(scope="module")
-def r():
-    try:
-        renderer = Renderer(SIZE, backend="egl")
-    except ResourceError as exc:  # no OpenGL through EGL on this machine
-        pytest.skip(str(exc))
-    yield renderer
-    renderer.release()
 
 
 @pytest.fixture(scope="module")

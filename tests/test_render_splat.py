@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import aniso3d
-from aniso3d import InputError, PointCloud, ResourceError
+from aniso3d import InputError, PointCloud
 from aniso3d.camera import Camera
 from aniso3d.frame import FrameView
 from aniso3d.images import save_png
@@ -28,19 +28,9 @@ from aniso3d.render_splat import (
     splat_coverage_np,
     tangent_frame,
 )
-from aniso3d.renderer import Renderer
 
 SIZE = (128, 128)
 
-
-@pytest.fixture(scope="module")
-def r():
-    try:
-        renderer = Renderer(SIZE, backend="egl")
-    except ResourceError as exc:  # no OpenGL through EGL on this machine
-        pytest.skip(str(exc))
-    yield renderer
-    renderer.release()
 
 
 @pytest.fixture(scope="module")

@@ -26,19 +26,9 @@ from aniso3d.render_volume import (
     pack_volume,
     trace_ray_np,
 )
-from aniso3d.renderer import Renderer
 
 SIZE = (128, 128)
 
-
-@pytest.fixture(scope="module")
-def r():
-    try:
-        renderer = Renderer(SIZE)
-    except ResourceError as exc:  # no OpenGL at all on this machine
-        pytest.skip(str(exc))
-    yield renderer
-    renderer.release()
 
 
 @pytest.fixture(scope="module")
