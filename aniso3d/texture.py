@@ -317,7 +317,10 @@ class AnisoTexture:
             arrays = {}
             try:
                 for n in cls._ARRAYS:
-                    arrays[n] = np.load(io.BytesIO(zf.read(n + ".npy")), allow_pickle=False)
+                    # Read each array straight from its member: no second copy
+                    # of the file's bytes in memory; the zip CRC is still checked.
+                    with zf.open(n + ".npy") as member:
+                        arrays[n] = np.lib.format.read_array(member, allow_pickle=False)
             except KeyError as exc:
                 raise FormatError(f"'{p}' is missing array {exc}; the file is damaged") from None
             except (ValueError, zipfile.BadZipFile, OSError, EOFError) as exc:
