@@ -233,12 +233,13 @@ def load_mesh(path: str | os.PathLike, name: str | None = None) -> Mesh:
         ) from None
     parts: list[Mesh] = []
     try:
-        dumped = scene.dump(concatenate=False) if hasattr(scene, "dump") else [scene]
+        placed = _scene_geometry(scene)
     except Exception as exc:
         raise InputError(
             f"could not flatten the scene in '{p}': {str(exc).strip()}. "
             "The file may be truncated or damaged"
         ) from None
+    dumped = [g for g, _ in placed]
     if suffix == ".ply":
         # trimesh reads a truncated ASCII PLY without a word: compare with the
         # face count its header declares (polygons only ever add triangles).
@@ -249,16 +250,36 @@ def load_mesh(path: str | os.PathLike, name: str | None = None) -> Mesh:
                 f"mesh file '{p}' declares {declared} faces but holds only {loaded}: "
                 "the file is truncated or damaged"
             )
-    for geom in dumped:
+    for geom, transform in placed:
         if not isinstance(geom, trimesh.Trimesh) or len(geom.faces) == 0:
             continue
-        parts.append(_from_trimesh(geom, p.name))
+        part = _from_trimesh(geom, p.name)
+        parts.append(part if transform is None else part.transformed(transform))
     if not parts:
         raise InputError(
             f"mesh file '{p}' holds no triangles (only points, lines or nothing); "
             "aniso3d needs a surface mesh"
         )
     return concatenate(parts, name=name or p.stem)
+
+
+def _scene_geometry(scene) -> list[tuple[object, np.ndarray | None]]:
+    """(geometry, 4x4 world transform or None) for every instance in a trimesh
+    scene, without copying geometry: ``Scene.dump`` copies each mesh with its
+    visuals, which converts colours through scipy for no use of ours."""
+    import trimesh
+
+    if not isinstance(scene, trimesh.Scene):
+        return [(scene, None)]
+    out = []
+    for node in scene.graph.nodes_geometry:
+        transform, name = scene.graph[node]
+        geom = scene.geometry.get(name)
+        if geom is None:
+            continue
+        t = np.asarray(transform, dtype=np.float64)
+        out.append((geom, None if np.array_equal(t, np.eye(4)) else t))
+    return out
 
 
 def _ply_declared_faces(p: Path) -> int | None:
