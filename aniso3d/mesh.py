@@ -257,8 +257,8 @@ def load_mesh(path: str | os.PathLike, name: str | None = None) -> Mesh:
         parts.append(part if transform is None else part.transformed(transform))
     if not parts:
         raise InputError(
-            f"mesh file '{p}' holds no triangles (only points, lines or nothing); "
-            "aniso3d needs a surface mesh"
+            f"mesh file '{p}' holds no triangles (only points, lines or nothing): "
+            "it is truncated, or not a surface mesh; aniso3d needs triangles or polygons"
         )
     return concatenate(parts, name=name or p.stem)
 
