@@ -168,15 +168,27 @@ class Camera:
         margin: float = 1.1,
         up=(0.0, 1.0, 0.0),
         distance_scale: float = 1.0,
+        points: np.ndarray | None = None,
     ) -> Camera:
         """Like :meth:`frame`, but just far enough that the eight corners of
-        ``bounds`` fit an image of ``aspect`` (width / height) with ``margin``:
-        a tighter fit than the bounding sphere."""
+        ``bounds`` (or, tighter still, the given ``points`` (N, 3), e.g. a
+        mesh's vertices) fit an image of ``aspect`` (width / height) with
+        ``margin``. Looks at the centre of ``bounds`` either way."""
         base = cls.frame(bounds, direction, fov, up=up)
         b = np.asarray(bounds, dtype=np.float64)
         target = np.asarray(base.target)
         right, upv, fwd = base.basis()
-        corners = np.array([[x, y, z] for x in b[:, 0] for y in b[:, 1] for z in b[:, 2]]) - target
+        if points is None or len(points) == 0:
+            corners = np.array([[x, y, z] for x in b[:, 0] for y in b[:, 1] for z in b[:, 2]])
+        else:
+            corners = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        corners = corners - target
+        if points is not None and len(points):
+            # Centre the points' extent across the view (not the box's centre,
+            # which an asymmetric object such as a tree does not fill).
+            x, y = corners @ right, corners @ upv
+            shift = right * 0.5 * (x.max() + x.min()) + upv * 0.5 * (y.max() + y.min())
+            target, corners = target + shift, corners - shift
         tan_v = np.tan(np.radians(fov) / 2)
         tan_h = tan_v * aspect
         toward_eye = corners @ -fwd

@@ -87,14 +87,28 @@ def thing_bounds(thing) -> np.ndarray:
     raise InputError(f"cannot frame a {type(thing).__name__}")
 
 
-def camera_from_args(args, bounds: np.ndarray) -> Camera:
+def frame_points(thing, limit: int = 50_000) -> np.ndarray | None:
+    """Up to ``limit`` points of the thing's surface (every k-th), for a
+    framing tighter than its bounding box."""
+    if isinstance(thing, Mesh):
+        pts = thing.vertices
+    elif isinstance(thing, PointCloud):
+        pts = thing.positions
+    elif isinstance(thing, AnisoTexture):
+        pts = thing.entry_centroid
+    else:
+        return None
+    return pts[:: max(1, len(pts) // limit)]
+
+
+def camera_from_args(args, bounds: np.ndarray, points: np.ndarray | None = None) -> Camera:
     if args.camera_position is not None:
         target = args.camera_target or tuple(0.5 * (bounds[0] + bounds[1]))
         return Camera(args.camera_position, target, fov=args.fov)
     az, el = np.radians(args.azimuth), np.radians(args.elevation)
     direction = (np.sin(az) * np.cos(el), np.sin(el), np.cos(az) * np.cos(el))
     cam = Camera.fit(bounds, direction=direction, fov=args.fov, aspect=args.size[0] / args.size[1],
-                     distance_scale=args.distance)
+                     distance_scale=args.distance, points=points)
     if args.camera_target is not None:
         cam = Camera(cam.position, args.camera_target, fov=args.fov)
     return cam
@@ -135,7 +149,7 @@ def cmd_render(args) -> int:
     refuse_overwriting_input(out, args.input)
     thing = load_input(args.input)
     bounds = thing_bounds(thing)
-    camera = camera_from_args(args, bounds)
+    camera = camera_from_args(args, bounds, frame_points(thing))
     with Renderer(args.size, backend=args.backend) as r:
         if args.method == "all":
             img, rows = figure(r, thing, camera, args)
@@ -207,7 +221,7 @@ def cmd_frames(args) -> int:
     if folder.exists() and not folder.is_dir():
         raise InputError(f"'{folder}' exists and is not a folder; 'frames' writes numbered PNGs into a folder")
     thing = load_input(args.input)
-    camera = camera_from_args(args, thing_bounds(thing))
+    camera = camera_from_args(args, thing_bounds(thing), frame_points(thing))
     method = args.method or default_method(thing)
     cams = turntable(camera, args.frames, args.degrees)
     progress = Progress("frames", enabled=None if not args.quiet else False)

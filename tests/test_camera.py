@@ -96,3 +96,22 @@ def test_fit_puts_every_corner_inside_and_touches_an_edge(aspect):
     slack = np.minimum(np.minimum(px[:, 0], size[0] - px[:, 0]) / size[0],
                        np.minimum(px[:, 1], size[1] - px[:, 1]) / size[1])  # fmt: skip
     assert slack.min() < 0.1
+
+
+def test_fit_to_points_frames_and_centres_them():
+    rng = np.random.default_rng(3)
+    pts = rng.normal(size=(2000, 3)) * [3.0, 1.0, 0.5] + [4.0, 0.0, 0.0]
+    b = np.array([pts.min(0) - [0, 0, 5], pts.max(0)])  # a box the points do not fill
+    size = (300, 200)
+    cam = Camera.fit(b, direction=(0.2, 0.3, 1.0), fov=40, aspect=1.5, margin=1.1, points=pts)
+    px = cam.project(pts, size, bounds=b)
+    assert px[:, 0].min() >= 0 and px[:, 0].max() <= size[0]
+    assert px[:, 1].min() >= 0 and px[:, 1].max() <= size[1]
+    # Centred within a few pixels (perspective makes it approximate).
+    assert abs(0.5 * (px[:, 0].min() + px[:, 0].max()) - size[0] / 2) < 0.05 * size[0]
+    assert abs(0.5 * (px[:, 1].min() + px[:, 1].max()) - size[1] / 2) < 0.05 * size[1]
+    # Tighter than fitting the box.
+    box = Camera.fit(b, direction=(0.2, 0.3, 1.0), fov=40, aspect=1.5, margin=1.1)
+    assert np.linalg.norm(np.subtract(cam.position, cam.target)) < np.linalg.norm(
+        np.subtract(box.position, box.target)
+    )
