@@ -20,12 +20,13 @@ Drawing is perspective-exact: every fragment intersects its pixel's eye ray
 with the splat's plane (through the screen-to-plane homography, so a grazing
 ray needs no division by the ray-plane cosine), discards what falls outside
 the shape, and writes the true depth, so splats foreshorten and occlude like
-polygons. The pixel holding a splat's projected centre is always drawn, so a
-splat smaller than a pixel (or seen edge-on) never vanishes; a point of zero
-area draws nothing. Most splats are point sprites (one vertex, the cheapest
-primitive a software rasteriser has); splats wider than the largest sprite
-(255 px on llvmpipe) go through a geometry shader instead, for the blocks of
-points where the CPU finds that possible.
+polygons. In "fast" and "blend" quality the pixel holding a splat's projected
+centre is always drawn, so a splat smaller than a pixel (or seen edge-on)
+never vanishes; a point of zero area draws nothing. Most splats are point
+sprites (one vertex, the cheapest primitive a software rasteriser has);
+splats wider than the largest sprite (255 px on llvmpipe) go through a
+geometry shader instead, for the blocks of points where the CPU finds that
+possible.
 
 Points are uploaded once, positions relative to the cloud's centre (float64
 subtraction, then float32), and the shaders never form eye-relative positions
@@ -39,11 +40,40 @@ from the intersection point to the eye). That is the colour forward shading
 would give, without shading the hidden layers of a dense cloud, which is
 most of the work on a software rasteriser.
 
-``quality="high"`` is the classic three passes: visibility (splats pushed
-back by ``push`` times their size), additive accumulation of shaded colour
-times a Gaussian weight, and weight, into a float texture (fragments behind
-the visibility depth are rejected before shading), and normalisation. It
-blends overlapping splats of one surface into a continuous one.
+``quality="high"`` is coverage-aware (anti-aliased), for accuracy at every
+distance and above all where a voxel covers a pixel or less. A splat adds
+the fraction ``c`` of each pixel it covers: its shape convolved with the
+pixel's box filter (the ground truth's) and sampled at the pixel centre. A
+splat well below a pixel is drawn as a filtered box of its *true* projected
+area (``sqrt(area)`` a side, no size factor), so the coverages it leaves in
+the pixels sum to exactly that area wherever it lies: no splat takes a whole
+pixel, as in "fast", and none vanishes. A resolved splat (a few pixels and
+more) is its exact perspective shape with the size factor, each pair of
+edges filtered across its distance in pixels; between the two regimes
+(:data:`AA_REGIME`) the two blend. Three passes: visibility (as "blend",
+each pixel's nearest pushed depth, kept as a linear depth); accumulation of
+``(colour c, c)`` into :data:`AA_SLABS` depth layers behind that depth
+(the first holds the visible surface, the others are thicker and thicker
+by :data:`AA_GROWTH`, and a fragment is shared between the two it lies
+between); and compositing front to back, like the volume renderer's: the
+visible surface's splats tile it (coverage added, at most what is left of
+the pixel), the splats of a deep layer hide each other at random (coverage
+``1 - exp(-sum)``; resolved ones there still tile), colour the
+coverage-weighted mean. Splats of one surface shade once at their centre
+when sub-pixel, per pixel when resolved. The result is composited over
+what the target holds, or under it where that is nearer, so separately
+drawn clouds combine in either order. Measured on the default tree against
+8 x 8 supersampled polygons (docs/splat_aa.md): 30 to 34 dB PSNR at 512 x
+512 from a frame-filling camera to 18 times as far, against 16 to 20 dB for
+"fast" and "blend" and 24 to 30 dB for the volume renderer, for 1.2 to 1.5
+times the frame time of "blend" (3 to 4 times "fast").
+
+``quality="blend"`` (the earlier "high") is the classic three passes:
+visibility (splats pushed back by ``push`` times their size), additive
+accumulation of shaded colour times a Gaussian weight, and weight, into a
+float texture (fragments behind the visibility depth are rejected before
+shading), and normalisation. It blends overlapping splats of one surface
+into a continuous one; coverage is on or off per pixel, as in "fast".
 
 :func:`splat_coverage_np` is the slow, obvious twin of the GPU coverage test.
 """
@@ -64,7 +94,7 @@ from .lod import LodPoints, _ranges, select_voxels
 from .points import PointCloud
 
 SHAPES = ("square", "disc", "ellipse")
-QUALITIES = ("fast", "high")
+QUALITIES = ("fast", "high", "blend")
 
 #: Major over minor axis of ``ellipse`` splats.
 DEFAULT_ASPECT = 2.0
@@ -77,19 +107,69 @@ DEFAULT_ASPECT = 2.0
 #: 0.2-1.0 % at 1.3 and 0.3-1.6 % at 1.45. Holes show more, so 1.3. (The
 #: image-wide mean colour error, dominated by silhouettes, is lowest at 1.15.)
 SQUARE_SIZE_FACTOR = 1.3
-#: Visibility push-back of ``quality="high"``, in units of the splat's larger
-#: half-axis, along the view axis: splats of the front surface within this
-#: depth of the nearest one blend; anything farther is hidden.
+#: Visibility push-back of ``quality="high"`` and ``"blend"``, in units of the
+#: splat's larger half-axis, along the view axis: splats of the front surface
+#: within this depth of the nearest one blend; farther ones are hidden
+#: ("blend") or go to the layers behind ("high").
 DEFAULT_PUSH = 1.0
 #: Points per block of the CPU's large-splat test (points are Morton-sorted, so
 #: a block is a compact piece of the cloud).
 BLOCK = 4096
-#: Accumulation texture type of ``quality="high"``: half floats change at most
+#: Accumulation texture type of ``quality="blend"``: half floats change at most
 #: one pixel in a hundred by one grey level against float32 (tree, sphere),
 #: for half the memory (RGBA16F; 32 MB at 2048 x 2048).
 ACCUM_DTYPE = "f2"
 #: Points per row of the attribute texture (two texels each).
 ATTRIB_PER_ROW = 2048
+#: Pixel filter of ``quality="high"`` (shaders/splat_filter.glsl): 0 the box
+#: of one pixel, the ground truth's (supersampling averages each pixel's
+#: samples); 1 the tent of radius 1 px (bilinear weights); 2 the quadratic
+#: B-spline of radius 1.5 px. All three are B-splines, so a splat keeps its
+#: projected area wherever it lies on the pixel grid. Measured on the default
+#: tree at 512 x 512 against 8 x 8 supersampled polygons at the cameras of
+#: demos/bench_splat_aa.py (distance scales 1 to 18), PSNR in the tree's box:
+#: the box 30.2 to 34.1 dB; the tent 1.1-2.9 dB and the B-spline 2.1-4.1 dB
+#: lower (blurrier than the truth, and more coverage spread past silhouettes).
+AA_FILTER = 0
+#: Depth layers of ``quality="high"``: the visible one and AA_SLABS - 1 behind
+#: it (at most 7; at most 4 from AA_DEEP on). Measured as above (mean PSNR over
+#: the five cameras): 4 layers growing by 4, 32.5 dB; 6 growing by 2, 32.6 dB
+#: for about 10 % more time; 3 growing by 8, 32.4 dB; 2 (first deep layer 1)
+#: 32.5 dB, but see AA_DEEP.
+AA_SLABS = 4
+#: Each layer behind the visible one is this many times as thick as the one
+#: before; the first is ``push`` times a typical (median) splat's larger
+#: half-axis.
+AA_GROWTH = 4.0
+#: First layer whose splats are taken to hide each other at random (coverage
+#: 1 - exp(-sum), resolved splats excepted) rather than to tile one surface;
+#: the layers before fill the pixel additively. Measured: with 1, a surface
+#: seen at a grazing angle (a sphere's rim) spans the boundary and its
+#: coverage flickers with the view (0.7 % of pixels of a telephoto sphere change
+#: by more than 2 levels between 1e4 and 1e7 units away; 0.1 % with 2); with 3
+#: the tree's mean PSNR drops by 0.9 dB (its crown is no surface). So 2.
+AA_DEEP = 2
+#: A splat whose true projected area is below AA_REGIME[0]^2 pixels is drawn as
+#: a filtered box of its true area; above AA_REGIME[1]^2, as its exact shape
+#: with the size factor (which closes the gaps between resolved splats); a
+#: smooth blend between. Measured: (0.5, 2) and (2, 5) are 0.75 and 0.1 dB
+#: below (1, 3) at the nearest camera, equal from the third on.
+AA_REGIME = (1.0, 3.0)
+#: In quality "high" a splat whose pixel box (with the filter's reach) is wider
+#: than this many pixels is shaded per pixel in the visible layer (through the
+#: geometry path); smaller ones take the colour shaded once at their centre,
+#: whose view vector differs from their pixels' by under 0.7 degrees (40
+#: degree field of view, 1024 pixels). Shading code in the sprites' shader
+#: cost 70 ms per 1024 x 1024 frame of the tree on llvmpipe even where no
+#: pixel ran it; at 8 px, every block of that frame took the (slower)
+#: geometry path.
+AA_SHADE_BOX = 32.0
+#: Texture type of the layers: AA_SLABS + 1 targets, 80 bytes per pixel
+#: (80 MiB at 1024 x 1024). Half floats drop small coverages added to large
+#: sums; that happens to help where the crown's fringe is over-covered (0.5
+#: and 1.6 dB higher PSNR at the two farthest cameras), which is no reason to
+#: rely on it.
+AA_DTYPE = "f4"
 
 _ATTRIBUTES = (("in_position", 3), ("in_normal", 3), ("in_size", 1), ("in_kd", 3), ("in_spec", 2))
 _FLOATS = sum(k for _, k in _ATTRIBUTES)
@@ -197,6 +277,11 @@ def splat_coverage_np(
     return cover
 
 
+def _filter_radius() -> float:
+    """Reach of the coverage-aware pixel filter, pixels (splat_filter.glsl)."""
+    return {0: 0.5, 1: 1.0, 2: 1.5}[AA_FILTER]
+
+
 def morton_order(points: np.ndarray) -> np.ndarray:
     """Indices sorting (N, 3) points along a Z-order curve (10 bits per axis),
     so consecutive points are close in space."""
@@ -236,6 +321,8 @@ class GPUPoints:
     block_hi: np.ndarray
     block_size: np.ndarray
     vaos: dict = field(default_factory=dict)
+    #: Median ``sqrt(area)`` of the points (of level 0 for a pyramid).
+    typical_size: float = 0.0
 
 
 @dataclass(eq=False)
@@ -272,8 +359,10 @@ class GPULodPoints(GPUPoints):
 @dataclass(eq=False)
 class _Targets:
     """Offscreen buffers for one framebuffer size, made on first use: the depth
-    texture (geometry pass of "fast", visibility pass of "high"), the point ids
-    (R32UI, "fast") and the accumulation texture ("high")."""
+    texture (geometry pass of "fast", visibility pass of "high" and "blend"),
+    the point ids (R32UI, "fast"), the accumulation texture ("blend") and the
+    layers of "high" (``slabs``: :data:`AA_SLABS` RGBA textures and one for the
+    deep layers' resolved coverage)."""
 
     depth: moderngl.Texture
     visibility: moderngl.Framebuffer
@@ -281,9 +370,12 @@ class _Targets:
     geometry: moderngl.Framebuffer | None = None
     accum: moderngl.Texture | None = None
     accumulate: moderngl.Framebuffer | None = None
+    slabs: tuple = ()
+    layered: moderngl.Framebuffer | None = None
 
     def objects(self) -> tuple:
-        return self.geometry, self.accumulate, self.visibility, self.ids, self.accum, self.depth
+        return (self.geometry, self.accumulate, self.layered, self.visibility, self.ids,
+                self.accum, *self.slabs, self.depth)  # fmt: skip
 
 
 # ---------------------------------------------------------------------- renderer
@@ -294,7 +386,9 @@ class SplatRenderer:
 
     ``quality="fast"``: one geometry pass writes each pixel's nearest splat
     (exact depth, point id), then one full-screen pass shades it with
-    ``shade()``. ``quality="high"``: visibility, accumulation, normalisation.
+    ``shade()``. ``quality="high"``: coverage-aware, visibility, accumulation
+    into depth layers, compositing. ``quality="blend"``: visibility,
+    accumulation, normalisation.
 
     ``max_sprite`` (pixels) is the widest splat drawn as a point sprite; wider
     ones take the geometry-shader path. It defaults to the context's largest
@@ -317,12 +411,17 @@ class SplatRenderer:
 
     # ------------------------------------------------------------ programs
 
-    def _program(self, kind: str, shape: str, sprite: bool) -> moderngl.Program:
-        """The splat program of a pass (geometry, visibility, accumulate, floor)."""
+    def _program(self, kind: str, shape: str, sprite: bool, aa: bool = False) -> moderngl.Program:
+        """The splat program of a pass (geometry, visibility, accumulate, floor);
+        ``aa``: the coverage-aware variant of visibility and accumulate."""
         defines: dict[str, object] = {"ROUND": int(shape != "square")}
         if kind == "floor":
             return self.gl.program("splat.vert", "splat_floor.frag", defines=defines)
         defines["PASS"] = {"geometry": 0, "visibility": 1, "accumulate": 2}[kind]
+        if aa:
+            defines.update(
+                AA=1, SLABS=AA_SLABS, DEEP=AA_DEEP, FILTER=AA_FILTER, GROWTH=f"{AA_GROWTH:.6f}"
+            )
         if sprite:
             return self.gl.program("splat.vert", "splat.frag", defines=defines)
         defines["GEOMETRY_PATH"] = 1
@@ -368,9 +467,13 @@ class SplatRenderer:
             vao = cache[id(prog)] = self.gl.track(vao)
         return vao
 
-    def _screen(self, fragment: str) -> tuple[moderngl.Program, moderngl.VertexArray]:
-        """A full-screen pass: one triangle, no vertex buffer."""
-        prog = self.gl.program("splat_resolve.vert", fragment)
+    def _screen(
+        self, fragment: str, aa: bool = False
+    ) -> tuple[moderngl.Program, moderngl.VertexArray]:
+        """A full-screen pass: one triangle, no vertex buffer (``aa``: the
+        compositing pass of quality "high", with its defines)."""
+        defines = {"SLABS": AA_SLABS, "DEEP": AA_DEEP} if aa else None
+        prog = self.gl.program("splat_resolve.vert", fragment, defines=defines)
         vao = self._screen_vaos.get(id(prog))
         if vao is None:
             vao = self._screen_vaos[id(prog)] = self.gl.track(self.gl.ctx.vertex_array(prog, []))
@@ -442,6 +545,7 @@ class SplatRenderer:
             block_lo=np.minimum.reduceat(local, start, axis=0),
             block_hi=np.maximum.reduceat(local, start, axis=0),
             block_size=np.maximum.reduceat(size, start),
+            typical_size=float(np.median(size)),
             **extra,
         )
 
@@ -488,6 +592,7 @@ class SplatRenderer:
             level_size=np.array([np.sqrt(c.areas.max()) if len(c) else 0.0 for c in clouds]),
         )  # fmt: skip
         handle.index_buffer = self.gl.track(self.gl.ctx.buffer(reserve=4 * max(len(clouds[0]), 1)))
+        handle.typical_size = float(np.median(np.sqrt(clouds[0].areas)))
         return handle
 
     def select(self, handle: GPULodPoints, view: FrameView, pixel_error: float = 1.0) -> dict:
@@ -646,14 +751,26 @@ class SplatRenderer:
             "u_push": opts["push"],
             "u_depth": (far / (far - near), t0 - near),
             "u_srange": (near - t0, far - t0),
+            "u_range": far - near,
+            "u_size_factor": opts["size_factor"],
+            "u_regime": tuple(float(x) for x in AA_REGIME),
+            "u_slab_min": handle.typical_size
+            * max(shape_extent(opts["splat"], opts["size_factor"], opts["aspect"])),
+            "u_background": tuple(float(x) for x in view.lighting.background),
             **view.lighting.uniforms(),
         }
 
-    def large_blocks(self, handle: GPUPoints, view: FrameView, opts: dict) -> list[tuple[int, int]]:
+    def large_blocks(
+        self, handle: GPUPoints, view: FrameView, opts: dict, limit: float | None = None
+    ) -> list[tuple[int, int]]:
         """(first, count) ranges of points that may hold a splat wider than
-        :attr:`max_sprite` in this frame: a conservative bound per block."""
+        ``limit`` pixels (default :attr:`max_sprite`) in this frame: a
+        conservative bound per block."""
+        limit = self.max_sprite if limit is None else limit
         w, h = view.size
-        if max(w, h) + 2.0 <= self.max_sprite:  # boxes are clamped to the viewport
+        # Boxes hold the centre's pixel, or with AA the filter's reach, besides the shape.
+        slack = 2.0 + (2.0 * _filter_radius() + 1.0 if opts["quality"] == "high" else 0.0)
+        if max(w, h) + slack <= limit:  # boxes are clamped to the viewport
             return []
         cam = view.camera
         r, u, f = cam.basis()
@@ -677,7 +794,7 @@ class SplatRenderer:
         for axis, scale, pixels in ((0, 1.0 / (tan * view.aspect), w), (1, 1.0 / tan, h)):
             lateral = np.abs(e[..., axis]).max(axis=1) + radius
             extent = scale * 2.0 * radius * (1.0 / zlo + lateral / zlo**2) * 0.5 * pixels
-            wide |= extent + 2.0 > self.max_sprite
+            wide |= extent + slack > limit
         wide &= depth_hi >= view.near
         ranges: list[tuple[int, int]] = []
         for i in np.flatnonzero(wide):
@@ -712,8 +829,9 @@ class SplatRenderer:
         tan = math.tan(math.radians(cam.fov) / 2)
         x = ((corners @ r) / depth / (tan * view.aspect) * 0.5 + 0.5) * w
         y = ((corners @ u) / depth / tan * 0.5 + 0.5) * h
-        x0, y0 = max(0, math.floor(x.min()) - 2), max(0, math.floor(y.min()) - 2)
-        x1, y1 = min(w, math.ceil(x.max()) + 2), min(h, math.ceil(y.max()) + 2)
+        pad = 2 + (math.ceil(_filter_radius()) + 1 if opts["quality"] == "high" else 0)
+        x0, y0 = max(0, math.floor(x.min()) - pad), max(0, math.floor(y.min()) - pad)
+        x1, y1 = min(w, math.ceil(x.max()) + pad), min(h, math.ceil(y.max()) + pad)
         if x0 <= 0 and y0 <= 0 and x1 >= w and y1 >= h:
             return None
         return (x0, y0, max(0, x1 - x0), max(0, y1 - y0))
@@ -726,20 +844,28 @@ class SplatRenderer:
         indexed = isinstance(handle, GPULodPoints)
         if indexed and not len(handle.drawn):
             return
-        prog = self._program(kind, opts["splat"], sprite=True)
+        aa = opts["quality"] == "high"
+        limit = self.max_sprite
+        if aa and kind == "accumulate":
+            # Quality "high" shades per pixel only splats of boxes wider than
+            # AA_SHADE_BOX, in the geometry path (llvmpipe pays for shading
+            # code in a shader even where no pixel runs it), so those go there.
+            limit = min(limit, AA_SHADE_BOX)
+        uniforms = {**uniforms, "u_max_sprite": limit, "u_shade_box": AA_SHADE_BOX}
+        prog = self._program(kind, opts["splat"], sprite=True, aa=aa)
         self._bind(prog, uniforms)
         if indexed:
             self._vao(handle, prog, True).render(moderngl.POINTS, vertices=len(handle.drawn))
         else:
             self._vao(handle, prog).render(moderngl.POINTS)
-        ranges = self.large_blocks(handle, view, opts)
+        ranges = self.large_blocks(handle, view, opts, limit)
         if indexed and ranges:
             # Buffer ranges -> ranges of the (ascending) drawn indices.
             lo = np.searchsorted(handle.drawn, [f for f, _ in ranges])
             hi = np.searchsorted(handle.drawn, [f + c for f, c in ranges])
             ranges = [(int(a), int(b - a)) for a, b in zip(lo, hi, strict=True) if b > a]
         if ranges:
-            prog = self._program(kind, opts["splat"], sprite=False)
+            prog = self._program(kind, opts["splat"], sprite=False, aa=aa)
             self._bind(prog, uniforms)
             vao = self._vao(handle, prog, indexed)
             for first, count in ranges:
@@ -751,7 +877,9 @@ class SplatRenderer:
     ) -> None:  # fmt: skip
         """Draw into ``fbo`` (bound, cleared to the background with alpha 0,
         viewport covering it); writes colour, alpha 1 where a splat landed
-        (coverage) and depth.
+        (coverage) and depth. With ``quality="high"`` alpha is the covered
+        fraction, and the cloud is composited with what ``fbo`` holds
+        (over it where nearer, under it where farther).
 
         A pyramid upload (:class:`GPULodPoints`) first selects this frame's
         points (:meth:`select`) with the screen-space error ``pixel_error``
@@ -769,7 +897,7 @@ class SplatRenderer:
         uniforms = self._uniforms(handle, view, opts)
         tg = self._offscreen(view.size, opts["quality"])
         box = self.screen_box(handle, view, opts)
-        for buf in (tg.geometry, tg.visibility, tg.accumulate, target):
+        for buf in (tg.geometry, tg.visibility, tg.accumulate, tg.layered, target):
             if buf is not None:
                 buf.scissor = box
         ctx.enable(moderngl.DEPTH_TEST | moderngl.PROGRAM_POINT_SIZE)
@@ -784,6 +912,25 @@ class SplatRenderer:
                 fragment = "splat_deferred.frag"
                 textures = {"u_ids": tg.ids, "u_geodepth": tg.depth, "u_attrib": handle.attrib}
                 uniforms["u_per_row"] = ATTRIB_PER_ROW
+            elif opts["quality"] == "high":
+                tg.visibility.use()
+                tg.visibility.clear(depth=1.0)
+                self._splats(handle, view, opts, "visibility", uniforms)
+                tg.layered.use()
+                tg.layered.clear(0.0, 0.0, 0.0, 0.0)
+                ctx.disable(moderngl.DEPTH_TEST)  # splat.frag reads u_visible itself
+                ctx.enable(moderngl.BLEND)
+                ctx.blend_equation = moderngl.FUNC_ADD
+                ctx.blend_func = moderngl.ONE, moderngl.ONE
+                tg.depth.use(location=0)
+                uniforms["u_visible"] = 0
+                self._splats(handle, view, opts, "accumulate", uniforms)
+                ctx.disable(moderngl.BLEND)
+                ctx.enable(moderngl.DEPTH_TEST)
+                fragment = "splat_aa_resolve.frag"
+                textures = {"u_visible": tg.depth, "u_resolved": tg.slabs[-1]}
+                for i, tex in enumerate(tg.slabs[:-1]):
+                    textures[f"u_slab[{i}]"] = tex
             else:
                 tg.visibility.use()
                 tg.visibility.clear(depth=1.0)
@@ -807,11 +954,19 @@ class SplatRenderer:
             for unit, (name, tex) in enumerate(textures.items()):
                 tex.use(location=unit)
                 uniforms[name] = unit
-            prog, vao = self._screen(fragment)
-            self._bind(prog, uniforms)
-            vao.render(moderngl.TRIANGLES, vertices=3)
+            if opts["quality"] == "high":
+                units = [uniforms.pop(f"u_slab[{i}]") for i in range(len(tg.slabs) - 1)]
+                uniforms["u_slab"] = units if len(units) > 1 else units[0]
+            prog, vao = self._screen(fragment, opts["quality"] == "high")
+            if opts["quality"] == "high":
+                self._composite(prog, vao, uniforms, target)
+            else:
+                self._bind(prog, uniforms)
+                vao.render(moderngl.TRIANGLES, vertices=3)
         finally:
+            target.depth_mask = True
             target.scissor = None
+            ctx.blend_equation = moderngl.FUNC_ADD
             ctx.depth_func = "<"
             ctx.blend_func = moderngl.DEFAULT_BLENDING
             ctx.disable(moderngl.BLEND)
@@ -819,6 +974,30 @@ class SplatRenderer:
             if ctx.fbo is not target:
                 target.use()
                 ctx.viewport = viewport
+
+    def _composite(self, prog, vao, uniforms: dict, target) -> None:
+        """The layers of ``quality="high"`` composited onto ``target`` (bound),
+        which may hold earlier draws: over them where this cloud's visible
+        layer is nearer (or nothing is there), and under them where it is
+        farther, so that separately drawn clouds combine like one (up to
+        rounding) in either order. The target's colour already holds its
+        background, so "under" adds (1 - alpha) (this colour - background):
+        the positive part, then the negative part by reverse subtraction."""
+        ctx = self.gl.ctx
+        ctx.enable(moderngl.BLEND)
+        ctx.blend_equation = moderngl.FUNC_ADD
+        ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
+        self._bind(prog, {**uniforms, "u_mode": 0})
+        vao.render(moderngl.TRIANGLES, vertices=3)
+        ctx.depth_func = ">"
+        target.depth_mask = False
+        ctx.blend_func = (moderngl.ONE_MINUS_DST_ALPHA, moderngl.ONE, moderngl.ZERO, moderngl.ONE)
+        self._bind(prog, {**uniforms, "u_mode": 1})
+        vao.render(moderngl.TRIANGLES, vertices=3)
+        ctx.blend_equation = (moderngl.FUNC_REVERSE_SUBTRACT, moderngl.FUNC_ADD)
+        ctx.blend_func = (moderngl.ONE_MINUS_DST_ALPHA, moderngl.ONE) * 2
+        self._bind(prog, {**uniforms, "u_mode": 2})
+        vao.render(moderngl.TRIANGLES, vertices=3)
 
     def draw_floor(self, handle: GPUPoints, view: FrameView, fbo=None, **options) -> None:
         """The benchmark floor: the same points as plain GL_POINTS covering the
@@ -852,8 +1031,18 @@ class SplatRenderer:
             tg.geometry = track(
                 ctx.framebuffer(color_attachments=[tg.ids], depth_attachment=tg.depth)
             )
-        if quality == "high" and tg.accum is None:
+        if quality == "blend" and tg.accum is None:
             tg.accum = track(ctx.texture(size, 4, dtype=ACCUM_DTYPE))
             tg.accum.filter = moderngl.NEAREST, moderngl.NEAREST
             tg.accumulate = track(ctx.framebuffer(color_attachments=[tg.accum]))
+        if quality == "high" and len(tg.slabs) != AA_SLABS + 1:
+            self.gl.free(tg.layered, *tg.slabs)
+            deep = min(4, max(1, AA_SLABS - AA_DEEP))  # channels of the resolved parts
+            tg.slabs = tuple(
+                track(ctx.texture(size, 4 if i < AA_SLABS else deep, dtype=AA_DTYPE))
+                for i in range(AA_SLABS + 1)
+            )
+            for tex in tg.slabs:
+                tex.filter = moderngl.NEAREST, moderngl.NEAREST
+            tg.layered = track(ctx.framebuffer(color_attachments=list(tg.slabs)))
         return tg

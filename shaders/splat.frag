@@ -17,7 +17,55 @@
 // between near and far, inside the shape; and the pixel holding the projected
 // centre is always drawn (at the centre's depth), so no splat vanishes. There
 // is no division by the ray-plane cosine: a grazing ray fails w' > 0 cleanly.
+//
+// AA (quality "high", coverage-aware): a fragment carries the fraction c of
+// its pixel the splat covers, the splat's shape convolved with the pixel
+// filter (splat_filter.glsl) and sampled at the pixel centre:
+//   sub-pixel regime: the splat as an axis-aligned box of its true projected
+//     area (SplatData.box, from splat.vert): c = amplitude x the filtered
+//     box along x times along y. The filter's copies at the pixel centres sum
+//     to 1, so the splat's c summed over the pixels is its true projected
+//     area wherever it lies: no splat gets a whole pixel, none vanishes;
+//   resolved regime: the exact (perspective) shape with the size factor, each
+//     pair of edges filtered across its distance in pixels, (1 - u) / |grad u|
+//     (a disc's or ellipse's across (1 - r) / |grad r|);
+//   in between (SplatData.regime) a blend. No centre pixel is forced; only
+//   the box splat.vert computed (SplatData.clip) is drawn, sprite or quad.
+// Depths are linear, (t - near) / (far - near) (a layer may be far thinner
+// than a step of window depth far away), the plane's where the pixel's ray
+// meets it, else the centre's, clamped to the bounding sphere (zrange):
+//   PASS 1 writes the pushed depth where the splat's filtered box reaches
+//     (sub-pixel regime) or where c >= MIN_COVERAGE (resolved): the visible
+//     layer;
+//   PASS 2 (c >= MIN_COVERAGE) adds (RGB c, c) to SLABS layers, additively:
+//     at the position pos = 0 up to the visibility depth in u_visible,
+//     pos = log_G(1 + (G - 1) dt / D) at dt beyond it (G = GROWTH, D = u_push
+//     u_slab_min: layer k starts D (G^k - 1) / (G - 1) behind), shared
+//     linearly between the layers floor(pos) and floor(pos) + 1 (the last
+//     takes everything beyond), so nothing jumps when a surface crosses a
+//     boundary. For the layers from DEEP on, the coverage of resolved splats
+//     (c times the regime weight) also goes to f_resolved (channel = layer -
+//     DEEP). A splat whose box is wider than u_shade_box pixels is shaded per
+//     fragment in layer 0 (in the geometry path, which render_splat.py sends
+//     those splats through); any other fragment takes its splat's colour
+//     shaded once at the centre (SplatData.rgb). splat_aa_resolve.frag composites the layers.
 #include "lighting.glsl"
+#ifdef AA
+#include "splat_filter.glsl"
+#ifndef SLABS
+#define SLABS 4
+#endif
+#ifndef DEEP
+#define DEEP 2
+#endif
+#if SLABS > 7 || SLABS - DEEP > 4
+#error at most 7 layers, at most 4 of them deep (one more draw buffer holds their resolved parts)
+#endif
+#define MIN_COVERAGE 1e-4
+#ifndef GROWTH
+#define GROWTH 4.0
+#endif
+#endif
 
 #ifndef PASS
 #define PASS 0
@@ -29,9 +77,19 @@
 uniform vec2 u_viewport;
 uniform vec2 u_srange;  // (near - t0, far - t0): the range of t - t0
 uniform vec2 u_depth;   // (K, t0 - near): window depth = K (t - near) / t
+#ifdef AA
+uniform float u_range;  // far - near
+#endif
 #if PASS == 2
 uniform mat3 u_ray;
 uniform sampler2D u_visible;
+#ifdef AA
+uniform float u_push;
+#ifdef GEOMETRY_PATH
+uniform float u_shade_box;    // splats of wider boxes are shaded per pixel
+#endif
+uniform float u_slab_min;     // a typical splat's larger half-axis, world units
+#endif
 #endif
 
 in SplatData {
@@ -49,18 +107,130 @@ in SplatData {
     flat vec3 n;
     flat vec3 kd;
     flat vec2 spec;
+#ifdef AA
+    flat vec2 cpx;
+    flat vec3 box;
+    flat float regime;
+    flat vec2 zrange;
+    flat vec3 rgb;
+    flat vec4 clip;
+#endif
 } fs_in;
 
 #if PASS == 0
 out uint f_id;
+#elif PASS == 2 && defined(AA)
+layout(location = 0) out vec4 f_slab[SLABS];
+layout(location = SLABS) out vec4 f_resolved;  // (c of resolved splats) per deep layer
 #elif PASS == 2
 out vec4 f_color;
+#endif
+
+#ifdef AA
+// The fraction of this pixel the splat covers (see the top); h as in main(),
+// hit: the pixel's ray meets the splat's plane in front, within near..far.
+float coverage(vec3 h, bool hit) {
+    float small = 0.0;
+    if (fs_in.regime < 1.0) {
+        vec2 d = gl_FragCoord.xy - fs_in.cpx;
+        small = fs_in.box.z * filtered_interval(d.x, fs_in.box.x) * filtered_interval(d.y, fs_in.box.y);
+    }
+    float large = 0.0;
+    if (fs_in.regime > 0.0 && hit) {
+        vec2 uv = h.xy / h.z;
+        vec2 k = 2.0 / (u_viewport * h.z);
+        // Gradients of u and v per pixel (the homography's derivatives).
+        vec2 gu = (fs_in.hu.yz - uv.x * fs_in.hw.yz) * k;
+        vec2 gv = (fs_in.hv.yz - uv.y * fs_in.hw.yz) * k;
+#if ROUND
+        float r = length(uv);
+        float g = r > 1e-6 ? length(uv.x * gu + uv.y * gv) / r : max(length(gu), length(gv));
+        g = max(g, 1e-30);
+        large = filter_cdf((1.0 - r) / g) - filter_cdf((-1.0 - r) / g);
+#else
+        float a = max(length(gu), 1e-30);
+        float b = max(length(gv), 1e-30);
+        large = (filter_cdf((1.0 - uv.x) / a) - filter_cdf((-1.0 - uv.x) / a))
+              * (filter_cdf((1.0 - uv.y) / b) - filter_cdf((-1.0 - uv.y) / b));
+#endif
+    }
+    return mix(small, large, fs_in.regime);
+}
+
+// Whether the filtered exact shape reaches this pixel (PASS 1 of a resolved
+// splat; cheaper than its coverage).
+bool reached(vec3 h, bool hit) {
+    if (!hit) return false;
+    vec2 uv = h.xy / h.z;
+    vec2 k = 2.0 / (u_viewport * h.z);
+    vec2 gu = (fs_in.hu.yz - uv.x * fs_in.hw.yz) * k;
+    vec2 gv = (fs_in.hv.yz - uv.y * fs_in.hw.yz) * k;
+#if ROUND
+    // |grad r| <= sqrt(2) max(|grad u|, |grad v|)
+    return length(uv) <= 1.0 + 1.415 * FILTER_RADIUS * max(length(gu), length(gv));
+#else
+    return abs(uv.x) <= 1.0 + FILTER_RADIUS * length(gu) && abs(uv.y) <= 1.0 + FILTER_RADIUS * length(gv);
+#endif
+}
 #endif
 
 void main() {
     vec3 xy1 = vec3(1.0, gl_FragCoord.xy / u_viewport * 2.0 - 1.0);
     vec3 h = vec3(dot(fs_in.hu, xy1), dot(fs_in.hv, xy1), dot(fs_in.hw, xy1));
     float sw = -dot(fs_in.hc, xy1);  // (t - t0) w'
+#ifdef AA
+    // Only the box the filtered splat reaches (a point sprite is a square
+    // around it; the geometry path's quad is the box itself).
+    if (any(lessThan(gl_FragCoord.xy, fs_in.clip.xy)) || any(greaterThan(gl_FragCoord.xy, fs_in.clip.zw))) discard;
+    bool hit = h.z > 0.0 && sw >= u_srange.x * h.z && sw <= u_srange.y * h.z;
+    // Linear depth (t - near) / (far - near), uniformly precise over the clip
+    // range, where a layer may be far thinner than a step of window depth:
+    // t - near = delta + (t - t0), the plane's where the ray meets it.
+    float lin = hit ? (u_depth.y + sw / h.z) / u_range : fs_in.centre_z;
+#if PASS == 1
+    // A splat in the sub-pixel regime marks the pixels its filtered box
+    // reaches (without computing its coverage); a resolved one the pixels it
+    // covers. (A point sprite is a square: more than the splat's box.)
+    if (fs_in.regime < 0.5) {
+        if (any(greaterThanEqual(abs(gl_FragCoord.xy - fs_in.cpx), fs_in.box.xy + FILTER_RADIUS))) discard;
+    } else if (!reached(h, hit)) {
+        discard;
+    }
+    float z = hit ? lin + fs_in.push / u_range : fs_in.centre_zp;
+    gl_FragDepth = clamp(z, fs_in.zrange.x, fs_in.zrange.y);
+#elif PASS == 2
+    float c = coverage(h, hit);
+    if (!(c >= MIN_COVERAGE)) discard;
+    float z = clamp(lin, fs_in.zrange.x, fs_in.zrange.y);
+    float vis = texelFetch(u_visible, ivec2(gl_FragCoord.xy), 0).r;
+    // Position among the layers, continuous: 0 up to the visibility depth,
+    // then one more per layer; a fragment is shared between the two layers
+    // it lies between, so nothing jumps when a surface crosses a boundary.
+    float pos = 0.0;
+    if (z > vis + 3e-7) {
+        float dt = (z - vis) * u_range;  // view depth beyond the visible layer
+        pos = log2(1.0 + (GROWTH - 1.0) * dt / (u_push * u_slab_min)) / log2(GROWTH);
+    }
+    int slab = min(int(pos), SLABS - 1);
+    float up = slab < SLABS - 1 ? fract(pos) : 0.0;
+    vec3 rgb = fs_in.rgb;
+#ifdef GEOMETRY_PATH
+    vec2 extent = fs_in.clip.zw - fs_in.clip.xy;
+    if (slab == 0 && max(extent.x, extent.y) + 0.02 > u_shade_box && hit) {
+        vec3 d = u_ray * xy1;
+        rgb = clamp(shade(fs_in.n, -normalize(d), fs_in.kd, fs_in.spec.x, fs_in.spec.y), 0.0, 1.0);
+    }
+#endif
+    vec4 v = vec4(rgb * c, c);
+    for (int i = 0; i < SLABS; ++i) f_slab[i] = v * (i == slab ? 1.0 - up : i == slab + 1 ? up : 0.0);
+    vec4 deep = vec4(0.0);
+    for (int i = 0; i < 4; ++i) {
+        int k = i + DEEP;
+        deep[i] = c * fs_in.regime * (k == slab ? 1.0 - up : k == slab + 1 ? up : 0.0);
+    }
+    f_resolved = deep;
+#endif
+#else
 #if ROUND
     bool inside = dot(h.xy, h.xy) <= h.z * h.z;
 #else
@@ -93,5 +263,6 @@ void main() {
     vec3 rgb = clamp(shade(fs_in.n, -normalize(d), fs_in.kd, fs_in.spec.x, fs_in.spec.y), 0.0, 1.0);
     float k = exp(-2.0 * dot(uv, uv));
     f_color = vec4(rgb * k, k);
+#endif
 #endif
 }

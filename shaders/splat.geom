@@ -4,7 +4,8 @@
 // and vs_box, the pixel box of its splat, or an empty box (x0 > x1) for a
 // splat the point-sprite path draws or nobody draws.
 // Out: a screen-aligned quad (triangle strip) covering the box at clip z = 0,
-// carrying SplatData unchanged; splat.frag decides every pixel exactly.
+// carrying SplatData unchanged (with AA, its members too); splat.frag decides
+// every pixel exactly.
 layout(points) in;
 layout(triangle_strip, max_vertices = 4) out;
 
@@ -25,6 +26,14 @@ in SplatData {
     flat vec3 n;
     flat vec3 kd;
     flat vec2 spec;
+#ifdef AA
+    flat vec2 cpx;
+    flat vec3 box;
+    flat float regime;
+    flat vec2 zrange;
+    flat vec3 rgb;
+    flat vec4 clip;
+#endif
 } gs_in[];
 
 flat in vec4 vs_box[];
@@ -44,6 +53,14 @@ out SplatData {
     flat vec3 n;
     flat vec3 kd;
     flat vec2 spec;
+#ifdef AA
+    flat vec2 cpx;
+    flat vec3 box;
+    flat float regime;
+    flat vec2 zrange;
+    flat vec3 rgb;
+    flat vec4 clip;
+#endif
 } gs_out;
 
 void main() {
@@ -66,6 +83,14 @@ void main() {
         gs_out.n = gs_in[0].n;
         gs_out.kd = gs_in[0].kd;
         gs_out.spec = gs_in[0].spec;
+#ifdef AA
+        gs_out.cpx = gs_in[0].cpx;
+        gs_out.box = gs_in[0].box;
+        gs_out.regime = gs_in[0].regime;
+        gs_out.zrange = gs_in[0].zrange;
+        gs_out.rgb = gs_in[0].rgb;
+        gs_out.clip = gs_in[0].clip;
+#endif
         gl_Position = vec4(corner[i], 0.0, 1.0);
         EmitVertex();
     }

@@ -34,9 +34,21 @@
 // rectangle clipped to the near plane (exact for a square), grown to hold
 // the centre of the pixel containing the projected splat centre (that pixel
 // is always drawn: a splat never vanishes, however small or oblique) and
-// clamped to the viewport. Tangent frame, shared with render_splat.tangent_frame
-// and texture._tangent_basis: t = normalize(n x h), b = n x t, h = x if
-// |n.x| < 0.9 else y.
+// clamped to the viewport (with AA, see below: grown by the pixel filter's
+// reach instead, no centre pixel forced). Tangent frame, shared with
+// render_splat.tangent_frame and texture._tangent_basis: t = normalize(n x h),
+// b = n x t, h = x if |n.x| < 0.9 else y.
+//
+// AA (quality "high", coverage-aware; see splat.frag): also the splat's
+// projected centre in pixels (continuous), its footprint for the sub-pixel
+// formula (an axis-aligned box of the true area's second moments, half-sides
+// box.xy in pixels, amplitude box.z = true projected area / box area), the
+// regime weight (0: sub-pixel box formula with the true area, 1: the exact
+// shape with the size factor; by sqrt(true projected area) between
+// u_regime.x and .y pixels), linear depths (t - near) / (far - near) of the
+// centre (centre_z, centre_zp) and of its bounding sphere (zrange; pushed by
+// push in PASS 1), the box drawn (clip) and, in PASS 2, its colour shaded
+// once at the centre (for sub-pixel splats and hidden layers).
 
 uniform vec3 u_q0;           // e + t0 f, local frame (see above)
 uniform float u_t0;          // view depth of the local origin
@@ -50,6 +62,15 @@ uniform vec2 u_depth;        // (K, delta): window depth = K (t - near) / t, del
 uniform vec2 u_extent;       // shape half-axes per unit of in_size
 uniform float u_max_sprite;  // widest point sprite the sprite path may draw, pixels
 uniform float u_push;        // visibility push-back, in units of the larger half-axis
+#ifdef AA
+#include "splat_filter.glsl"
+uniform float u_size_factor; // the shape's linear scale over its true area's
+uniform vec2 u_regime;       // sqrt(true projected area) in pixels: box formula below x, exact shape above y
+uniform float u_range;       // far - near
+#if PASS == 2
+#include "lighting.glsl"
+#endif
+#endif
 
 in vec3 in_position;
 in vec3 in_normal;
@@ -72,6 +93,14 @@ out SplatData {
     flat vec3 n;           // unit normal, world orientation
     flat vec3 kd;
     flat vec2 spec;        // (ks, shininess)
+#ifdef AA
+    flat vec2 cpx;         // projected centre, pixels (continuous)
+    flat vec3 box;         // sub-pixel footprint: half-sides (pixels), amplitude
+    flat float regime;     // 0: sub-pixel box formula, 1: exact shape
+    flat vec2 zrange;      // linear depths of the bounding sphere's front and back
+    flat vec3 rgb;         // shade() at the centre (PASS 2)
+    flat vec4 clip;        // the pixel box drawn (x0, y0, x1, y1)
+#endif
 } vs_out;
 
 #ifdef GEOMETRY_PATH
@@ -194,6 +223,61 @@ void main() {
     lo = (lo * 0.5 + 0.5) * u_viewport;
     hi = (hi * 0.5 + 0.5) * u_viewport;
 
+#ifdef AA
+    // The footprint of the sub-pixel formula: the projected half-axes pu, pv
+    // (pixels, affine at the centre) of the true-area shape (the drawn one
+    // over the size factor); a box with the same second moments along x and y
+    // (a square's are (pu pu^T + pv pv^T) / 3, a disc's / 4; a box of
+    // half-side b has b^2 / 3) whose amplitude keeps the true projected area.
+    vs_out.cpx = vec2(-1e9);
+    vs_out.box = vec3(0.0);
+    vs_out.regime = 1.0;
+    if (depth >= u_near) {
+        vec2 pix = 0.5 * u_viewport * u_proj_scale / depth;
+        vs_out.cpx = (ce.xy * u_proj_scale / depth * 0.5 + 0.5) * u_viewport;
+        vec2 pu = pix * (te.xy + ce.xy * (te.z / depth)) / u_size_factor;
+        vec2 pv = pix * (be.xy + ce.xy * (be.z / depth)) / u_size_factor;
+#if ROUND
+        const float AREA = 3.14159265;  // of the unit disc
+        const float MOMENT = 0.75;      // 3 x its second moment per axis
+#else
+        const float AREA = 4.0;         // of the square [-1, 1]^2
+        const float MOMENT = 1.0;
+#endif
+        float area = AREA * abs(pu.x * pv.y - pu.y * pv.x);  // true projected area, pixels
+        vec2 half_ = sqrt(MOMENT * (pu * pu + pv * pv));
+        float box_area = 4.0 * half_.x * half_.y;
+        if (area > box_area) {  // a disc's moment box is smaller than the disc
+            half_ *= sqrt(area / box_area);
+            box_area = area;
+        }
+        vs_out.box = vec3(half_, box_area > 0.0 ? area / box_area : 0.0);
+        vs_out.regime = smoothstep(u_regime.x, u_regime.y, sqrt(area));
+    }
+    // Linear depths (t - near) / (far - near) of the bounding sphere's front
+    // and back (pushed in PASS 1).
+    float rad = length(h);
+#if PASS == 1
+    float pz = push;
+#else
+    float pz = 0.0;
+#endif
+    vs_out.zrange = clamp((u_depth.y - gf + pz + vec2(-rad, rad)) / u_range, 0.0, 1.0);
+    // The centre's linear depth, plain and pushed.
+    vs_out.centre_z = (u_depth.y - gf) / u_range;
+    vs_out.centre_zp = (u_depth.y - gf + push) / u_range;
+    vs_out.rgb = vec3(0.0);
+#if PASS == 2
+    vs_out.rgb = clamp(shade(n, normalize(g - u_t0 * u_ray[0]), in_kd, in_spec.x, in_spec.y), 0.0, 1.0);
+#endif
+    // Every pixel the filter reaches (the exact shape's edges are filtered
+    // across their own normals, so its corners reach sqrt(2) times as far);
+    // no centre pixel is forced (a splat gives its projected area, however
+    // small).
+    float reach = FILTER_RADIUS * (vs_out.regime > 0.0 ? 1.415 : 1.0) + 0.01;
+    lo -= reach;
+    hi += reach;
+#else
     if (depth >= u_near && depth <= u_far) {
         vec2 p = (ce.xy * u_proj_scale / depth * 0.5 + 0.5) * u_viewport;
         if (all(greaterThanEqual(p, vec2(0.0))) && all(lessThan(p, u_viewport))) {
@@ -203,12 +287,16 @@ void main() {
             hi = max(hi, px + 0.75);
         }
     }
+#endif
     lo = max(lo, vec2(0.0));
     hi = min(hi, u_viewport);
     if (any(greaterThanEqual(lo, hi))) {  // off screen
         cull();
         return;
     }
+#ifdef AA
+    vs_out.clip = vec4(lo, hi);
+#endif
     float size = max(hi.x - lo.x, hi.y - lo.y) + 0.02;
 #ifdef GEOMETRY_PATH
     vs_box = size > u_max_sprite ? vec4(lo - 0.01, hi + 0.01) : vec4(1.0, 1.0, 0.0, 0.0);
