@@ -274,7 +274,11 @@ def test_viewer_toggles_lod_with_l(xserver, tmp_path):  # noqa: F811
             s.wait_for(rf"showing {method} \(.*level of detail$", after=mark)
             lod = s.screenshot()
             assert drawn(lod) > 0.9 * drawn(single) and mean_diff(lod, single) < 1.0
+            # Back to the single level; wait for it, or the next key may land
+            # before the viewer has shown (and logged) the change.
+            mark = len(s.log())
             s.key("l")
+            s.wait_for(rf"showing {method} \(.*voxels 32³ K=64$", after=mark)
         s.key("o")
         mark = len(s.log())
         s.key("l")
