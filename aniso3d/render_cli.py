@@ -38,7 +38,9 @@ def add_render_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--placement", choices=("centroid", "center", "sphere"), default="centroid")
     p.add_argument("--points-per-entry", type=positive_int, default=1)
     p.add_argument("--splat", choices=("square", "disc", "ellipse"), default="disc")
-    p.add_argument("--quality", choices=("fast", "high"), default="fast")
+    p.add_argument("--quality", choices=("fast", "high", "blend"), default="high",
+                   help="splats: high = coverage-aware anti-aliasing (most accurate; docs/splat_aa.md), "
+                        "fast = one splat per pixel (2x the GL_POINTS floor), blend = weighted blending")
     p.add_argument("--azimuth", type=float, default=30.0, help="camera azimuth about +y, degrees")
     p.add_argument("--elevation", type=float, default=15.0, help="camera elevation, degrees")
     p.add_argument("--distance", type=positive_float, default=1.0,
@@ -187,7 +189,7 @@ def figure(r, thing, camera: Camera, args) -> tuple[np.ndarray, list[str]]:
         rows.append(f"ground truth  polygons {args.gt_ssaa}x{args.gt_ssaa}  {gt_ms:8.1f} ms")
     else:
         rows.append("no polygon ground truth for this input: errors not measured")
-    names = {"mesh": "(a) polygons", "volume": "(b) volume rendering", "splat": f"(c) {args.splat} splats"}
+    names = {"mesh": "(a) polygons", "volume": "(b) volume rendering", "splat": f"(c) {args.splat} splats ({args.quality})"}
     for method in methods:
         ssaa = args.ssaa
         opts = {**render_options(args), **draw_options(method, args)}
