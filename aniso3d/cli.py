@@ -225,8 +225,10 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("build", help="mesh -> anisotropic 3D texture (.a3d) or points (.ply)")
     b.add_argument("mesh", nargs="?", default=None, help="mesh file (default: the built-in tree)")
     b.add_argument("-o", "--output", default="tree.a3d", help="output .a3d texture or .ply points")
-    b.add_argument("--resolution", "-r", type=positive_int, default=DEFAULT_RESOLUTION, help="voxels along the longest axis")
-    b.add_argument("--directions", "-k", type=positive_int, default=DEFAULT_DIRECTIONS, help="sphere sample directions K")
+    b.add_argument("--resolution", "-r", type=positive_int, default=DEFAULT_RESOLUTION,
+                   help="voxels along the longest axis")
+    b.add_argument("--directions", "-k", type=positive_int, default=DEFAULT_DIRECTIONS,
+                   help="sphere sample directions K")
     b.add_argument("--direction-set", choices=("fibonacci", "random"), default="fibonacci")
     b.add_argument("--seed", type=int, default=0, help="seed of the random direction set")
     b.add_argument("--placement", choices=("centroid", "center", "sphere"), default="centroid")

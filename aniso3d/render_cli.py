@@ -33,8 +33,10 @@ def add_render_options(p: argparse.ArgumentParser) -> None:
                    help="supersampling factor per axis (1 = one sample per pixel)")
     p.add_argument("--gt-ssaa", type=positive_int, default=4,
                    help="supersampling of the polygon ground truth errors are measured against")
-    p.add_argument("--resolution", "-r", type=positive_int, default=DEFAULT_RESOLUTION, help="voxels along the longest axis")
-    p.add_argument("--directions", "-k", type=positive_int, default=DEFAULT_DIRECTIONS, help="sphere sample directions K")
+    p.add_argument("--resolution", "-r", type=positive_int, default=DEFAULT_RESOLUTION,
+                   help="voxels along the longest axis")
+    p.add_argument("--directions", "-k", type=positive_int, default=DEFAULT_DIRECTIONS,
+                   help="sphere sample directions K")
     p.add_argument("--placement", choices=("centroid", "center", "sphere"), default="centroid")
     p.add_argument("--points-per-entry", type=positive_int, default=1)
     p.add_argument("--splat", choices=("square", "disc", "ellipse"), default="disc")
@@ -189,7 +191,8 @@ def figure(r, thing, camera: Camera, args) -> tuple[np.ndarray, list[str]]:
         rows.append(f"ground truth  polygons {args.gt_ssaa}x{args.gt_ssaa}  {gt_ms:8.1f} ms")
     else:
         rows.append("no polygon ground truth for this input: errors not measured")
-    names = {"mesh": "(a) polygons", "volume": "(b) volume rendering", "splat": f"(c) {args.splat} splats ({args.quality})"}
+    names = {"mesh": "(a) polygons", "volume": "(b) volume rendering",
+             "splat": f"(c) {args.splat} splats ({args.quality})"}
     for method in methods:
         ssaa = args.ssaa
         opts = {**render_options(args), **draw_options(method, args)}

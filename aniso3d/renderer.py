@@ -37,8 +37,8 @@ METHODS = ("mesh", "volume", "splat")
 
 #: Options that change how a thing is converted (and so key the upload cache).
 BUILD_OPTIONS = ("resolution", "directions", "placement", "per_entry", "point_normal")
-DEFAULT_BUILD = {"resolution": DEFAULT_RESOLUTION, "directions": DEFAULT_DIRECTIONS, "placement": "centroid", "per_entry": 1,
-                 "point_normal": "mean"}  # fmt: skip
+DEFAULT_BUILD = {"resolution": DEFAULT_RESOLUTION, "directions": DEFAULT_DIRECTIONS,
+                 "placement": "centroid", "per_entry": 1, "point_normal": "mean"}  # fmt: skip
 
 
 def check_size(size) -> tuple[int, int]:
@@ -244,7 +244,8 @@ class Renderer:
         if not isinstance(camera, Camera):
             raise InputError(f"render needs an aniso3d.Camera, got {type(camera).__name__}")
         if method is None:
-            method = "volume" if isinstance(thing, AnisoTexture) else "splat" if isinstance(thing, PointCloud) else "mesh"
+            kinds = ((AnisoTexture, "volume"), (PointCloud, "splat"))
+            method = next((m for cls, m in kinds if isinstance(thing, cls)), "mesh")
         if isinstance(ssaa, bool) or int(ssaa) != ssaa or ssaa < 1:
             raise InputError(f"supersampling factor must be a whole number >= 1, got {ssaa!r}")
         ssaa = int(ssaa)
@@ -330,7 +331,7 @@ class Renderer:
         self._uploads.clear()
         self._converted.clear()
         self._pyramids.clear()
-        for method, impl in self._impl.items():
+        for impl in self._impl.values():
             rel = getattr(impl, "release_all", None)
             if rel:
                 rel()

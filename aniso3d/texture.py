@@ -21,7 +21,6 @@ finer one; the point stage uses them to put points on the true surface.
 from __future__ import annotations
 
 import hashlib
-import io
 import json
 import os
 import time
