@@ -380,27 +380,7 @@ def select_voxels(
     culled whatever clip range it picks).
     """
     pyr = as_pyramid(levels)
-    if not isinstance(camera, Camera):
-        raise InputError(f"select_voxels needs an aniso3d.Camera, got {type(camera).__name__}")
-    w, h_px = (int(size[0]), int(size[1]))
-    if w < 1 or h_px < 1:
-        raise InputError(f"image size must be at least 1x1 pixels, got {size}")
-    if not (pixel_error > 0 and np.isfinite(pixel_error)):
-        raise InputError(f"pixel_error must be a positive number of pixels, got {pixel_error}")
-    near = camera.near if near is None else near
-    far = camera.far if far is None else far
-    near = 0.0 if near is None else float(near)
-    far = np.inf if far is None else float(far)
-    right, up, fwd = camera.basis()
-    eye = np.asarray(camera.position, dtype=np.float64)
-    tan_y = math.tan(math.radians(camera.fov) / 2.0)
-    tan_x = tan_y * w / h_px
-    # Unit normals of the side planes in the (lateral, depth) plane.
-    cx, sx = 1.0 / math.hypot(1.0, tan_x), tan_x / math.hypot(1.0, tan_x)
-    cy, sy = 1.0 / math.hypot(1.0, tan_y), tan_y / math.hypot(1.0, tan_y)
-    # pixels = h * scale / depth
-    scale = h_px / (2.0 * tan_y)
-    axes = np.stack([right, up, fwd], axis=1)  # world -> (x, y, z) eye frame
+    view = _frustum(camera, size, pixel_error, near, far, "select_voxels")
 
     L = len(pyr)
     chosen: list[np.ndarray] = [np.zeros(0, dtype=np.int64)] * L
@@ -417,12 +397,9 @@ def select_voxels(
         ordered = len(cand) == tex.n_voxels
         if ordered:
             cand = np.arange(tex.n_voxels, dtype=np.int64)
-        x, y, z = _eye_frame(pyr.centres(lvl), None if ordered else cand, h, tex.origin, eye, axes)
+        x, y, z = _eye_frame(pyr.centres(lvl), None if ordered else cand, h, tex.origin, view.eye, view.axes)
         if cull:
-            inside = (
-                (z + rad >= near) & (z - rad <= far)
-                & (np.abs(x) * cx - z * sx <= rad) & (np.abs(y) * cy - z * sy <= rad)
-            )  # fmt: skip
+            inside = view.contains(x, y, z, rad)
             culled[lvl] = int(len(cand) - np.count_nonzero(inside))
             if culled[lvl]:
                 cand, z = cand[inside], z[inside]
@@ -431,13 +408,65 @@ def select_voxels(
             break
         # Depth of the sphere's front; a sphere around the eye is always refined.
         front = z - rad
-        big = (front <= 0) | (h * scale > pixel_error * np.where(front > 0, front, 1.0))
+        big = (front <= 0) | (h * view.scale > pixel_error * np.where(front > 0, front, 1.0))
         chosen[lvl] = cand[~big] if ordered else np.sort(cand[~big])
         parents = cand[big]
         refined[lvl] = len(parents)
         offsets, index = pyr.children(lvl)
         cand = index[_ranges(offsets[parents], offsets[parents + 1])]
     return Selection(chosen, culled, refined)
+
+
+@dataclass(frozen=True)
+class _Frustum:
+    """A camera's view as the voxel walks use it: eye, world->eye axes, clip
+    depths, the side planes' unit normals in the (lateral, depth) plane, and
+    ``scale`` (pixels = size * scale / depth)."""
+
+    eye: np.ndarray
+    axes: np.ndarray
+    near: float
+    far: float
+    cx: float
+    sx: float
+    cy: float
+    sy: float
+    scale: float
+
+    def contains(self, x, y, z, rad) -> np.ndarray:
+        """Which spheres (eye-frame centres x, y, z; radius rad) touch the view."""
+        return (
+            (z + rad >= self.near) & (z - rad <= self.far)
+            & (np.abs(x) * self.cx - z * self.sx <= rad) & (np.abs(y) * self.cy - z * self.sy <= rad)
+        )  # fmt: skip
+
+
+def _frustum(camera, size, pixel_error, near, far, caller: str) -> _Frustum:
+    """Check a selection's arguments and set up its view. ``near``/``far``
+    default to the camera's own, else the eye plane and no far limit."""
+    if not isinstance(camera, Camera):
+        raise InputError(f"{caller} needs an aniso3d.Camera, got {type(camera).__name__}")
+    w, h_px = (int(size[0]), int(size[1]))
+    if w < 1 or h_px < 1:
+        raise InputError(f"image size must be at least 1x1 pixels, got {size}")
+    if not (pixel_error > 0 and np.isfinite(pixel_error)):
+        raise InputError(f"pixel_error must be a positive number of pixels, got {pixel_error}")
+    near = camera.near if near is None else near
+    far = camera.far if far is None else far
+    right, up, fwd = camera.basis()
+    tan_y = math.tan(math.radians(camera.fov) / 2.0)
+    tan_x = tan_y * w / h_px
+    return _Frustum(
+        eye=np.asarray(camera.position, dtype=np.float64),
+        axes=np.stack([right, up, fwd], axis=1),  # world -> (x, y, z) eye frame
+        near=0.0 if near is None else float(near),
+        far=np.inf if far is None else float(far),
+        cx=1.0 / math.hypot(1.0, tan_x),
+        sx=tan_x / math.hypot(1.0, tan_x),
+        cy=1.0 / math.hypot(1.0, tan_y),
+        sy=tan_y / math.hypot(1.0, tan_y),
+        scale=h_px / (2.0 * tan_y),
+    )
 
 
 def _eye_frame(centres, index, h, origin, eye, axes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -749,33 +778,12 @@ def volume_level(
     """
     t0 = time.perf_counter()
     pyr = as_pyramid(levels)
-    if not isinstance(camera, Camera):
-        raise InputError(f"volume_level needs an aniso3d.Camera, got {type(camera).__name__}")
-    w, h_px = (int(size[0]), int(size[1]))
-    if w < 1 or h_px < 1:
-        raise InputError(f"image size must be at least 1x1 pixels, got {size}")
-    if not (pixel_error > 0 and np.isfinite(pixel_error)):
-        raise InputError(f"pixel_error must be a positive number of pixels, got {pixel_error}")
-    near = camera.near if near is None else near
-    far = camera.far if far is None else far
-    near = 0.0 if near is None else float(near)
-    far = np.inf if far is None else float(far)
-    right, up, fwd = camera.basis()
-    tan_y = math.tan(math.radians(camera.fov) / 2.0)
-    tan_x = tan_y * w / h_px
-    cx, sx = 1.0 / math.hypot(1.0, tan_x), tan_x / math.hypot(1.0, tan_x)
-    cy, sy = 1.0 / math.hypot(1.0, tan_y), tan_y / math.hypot(1.0, tan_y)
-    scale = h_px / (2.0 * tan_y)
+    view = _frustum(camera, size, pixel_error, near, far, "volume_level")
     tex = pyr[0]
     h0 = float(tex.voxel_size)
     rad = 0.5 * math.sqrt(3.0) * h0
-    axes = np.stack([right, up, fwd], axis=1)
-    eye = np.asarray(camera.position)
-    x, y, z = _eye_frame(pyr.centres(0), None, h0, tex.origin, eye, axes)
-    inside = (
-        (z + rad >= near) & (z - rad <= far)
-        & (np.abs(x) * cx - z * sx <= rad) & (np.abs(y) * cy - z * sy <= rad)
-    )  # fmt: skip
+    x, y, z = _eye_frame(pyr.centres(0), None, h0, tex.origin, view.eye, view.axes)
+    inside = view.contains(x, y, z, rad)
     if not inside.any():
         level, depth = len(pyr) - 1, math.inf
     else:
@@ -784,7 +792,7 @@ def volume_level(
             level = 0
         else:
             # h0 2^l * scale / depth <= pixel_error
-            ratio = pixel_error * depth / (h0 * scale)
+            ratio = pixel_error * depth / (h0 * view.scale)
             level = 0 if ratio < 2.0 else min(int(math.floor(math.log2(ratio))), len(pyr) - 1)
     if stats is not None:
         hl = float(pyr[level].voxel_size)
@@ -793,7 +801,7 @@ def volume_level(
             voxel_size=hl,
             voxels=pyr[level].n_voxels,
             depth=depth,
-            pixels=hl * scale / depth if 0 < depth < math.inf else math.inf,
+            pixels=hl * view.scale / depth if 0 < depth < math.inf else math.inf,
             seconds=time.perf_counter() - t0,
         )
     return level
