@@ -836,6 +836,27 @@ class SplatRenderer:
             return None
         return (x0, y0, max(0, x1 - x0), max(0, y1 - y0))
 
+    def _visible_then_accumulate(self, handle, view, opts, uniforms, tg, into) -> None:
+        """The blended qualities' first two passes: each pixel's nearest
+        (pushed-back) depth into ``tg.visibility``, then additive
+        accumulation into ``into``, where splat.frag tests each fragment
+        against that depth itself."""
+        ctx = self.gl.ctx
+        tg.visibility.use()
+        tg.visibility.clear(depth=1.0)
+        self._splats(handle, view, opts, "visibility", uniforms)
+        into.use()
+        into.clear(0.0, 0.0, 0.0, 0.0)
+        ctx.disable(moderngl.DEPTH_TEST)
+        ctx.enable(moderngl.BLEND)
+        ctx.blend_equation = moderngl.FUNC_ADD
+        ctx.blend_func = moderngl.ONE, moderngl.ONE
+        tg.depth.use(location=0)
+        uniforms["u_visible"] = 0
+        self._splats(handle, view, opts, "accumulate", uniforms)
+        ctx.disable(moderngl.BLEND)
+        ctx.enable(moderngl.DEPTH_TEST)
+
     def _splats(
         self, handle: GPUPoints, view: FrameView, opts: dict, kind: str, uniforms: dict
     ) -> None:
@@ -913,39 +934,13 @@ class SplatRenderer:
                 textures = {"u_ids": tg.ids, "u_geodepth": tg.depth, "u_attrib": handle.attrib}
                 uniforms["u_per_row"] = ATTRIB_PER_ROW
             elif opts["quality"] == "high":
-                tg.visibility.use()
-                tg.visibility.clear(depth=1.0)
-                self._splats(handle, view, opts, "visibility", uniforms)
-                tg.layered.use()
-                tg.layered.clear(0.0, 0.0, 0.0, 0.0)
-                ctx.disable(moderngl.DEPTH_TEST)  # splat.frag reads u_visible itself
-                ctx.enable(moderngl.BLEND)
-                ctx.blend_equation = moderngl.FUNC_ADD
-                ctx.blend_func = moderngl.ONE, moderngl.ONE
-                tg.depth.use(location=0)
-                uniforms["u_visible"] = 0
-                self._splats(handle, view, opts, "accumulate", uniforms)
-                ctx.disable(moderngl.BLEND)
-                ctx.enable(moderngl.DEPTH_TEST)
+                self._visible_then_accumulate(handle, view, opts, uniforms, tg, tg.layered)
                 fragment = "splat_aa_resolve.frag"
                 textures = {"u_visible": tg.depth, "u_resolved": tg.slabs[-1]}
                 for i, tex in enumerate(tg.slabs[:-1]):
                     textures[f"u_slab[{i}]"] = tex
             else:
-                tg.visibility.use()
-                tg.visibility.clear(depth=1.0)
-                self._splats(handle, view, opts, "visibility", uniforms)
-                tg.accumulate.use()
-                tg.accumulate.clear(0.0, 0.0, 0.0, 0.0)
-                ctx.disable(moderngl.DEPTH_TEST)  # splat.frag tests against u_visible itself
-                ctx.enable(moderngl.BLEND)
-                ctx.blend_equation = moderngl.FUNC_ADD
-                ctx.blend_func = moderngl.ONE, moderngl.ONE
-                tg.depth.use(location=0)
-                uniforms["u_visible"] = 0
-                self._splats(handle, view, opts, "accumulate", uniforms)
-                ctx.disable(moderngl.BLEND)
-                ctx.enable(moderngl.DEPTH_TEST)
+                self._visible_then_accumulate(handle, view, opts, uniforms, tg, tg.accumulate)
                 fragment = "splat_resolve.frag"
                 textures = {"u_accum": tg.accum, "u_visible": tg.depth}
             target.use()
