@@ -23,7 +23,7 @@ import math
 
 import numpy as np
 
-from .errors import InputError
+from aniso3d.errors import InputError
 
 #: Peak value of the 8-bit encoded images all metrics work on.
 DATA_RANGE = 255.0

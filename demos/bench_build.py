@@ -39,7 +39,7 @@ def worker(name: str, resolution: int, directions: int, trace: bool) -> dict:
     import numpy as np
 
     from aniso3d import build_texture, scenes
-    from aniso3d.clip import make_grid
+    from aniso3d.build.clip import make_grid
 
     t0 = time.perf_counter()
     mesh = scenes.tree()

@@ -1,7 +1,7 @@
 """Level of detail in the renderers: points drawn, frame time and error, LOD vs single level.
 
 The default tree (``aniso3d.scenes.tree()``) -> ``build_texture(mesh, 128, 64)``
--> its exact pyramid (:mod:`aniso3d.lod`), drawn at 1024x1024 from
+-> its exact pyramid (:mod:`aniso3d.render.lod`), drawn at 1024x1024 from
 ``Camera.fit(bounds, distance_scale=s)`` for s from next to the crown (0.25,
 the eye just outside the tree's bounding box) to far away (32), four ways
 with splats (single level / LOD, one point per entry / adaptive counts) and
@@ -42,13 +42,13 @@ from pathlib import Path
 import numpy as np
 
 import aniso3d
-from aniso3d import lod
-from aniso3d.camera import Camera
-from aniso3d.frame import FrameView
-from aniso3d.images import save_png
 from aniso3d.metrics import psnr, ssim
-from aniso3d.render_splat import _FLOATS, ATTRIB_PER_ROW
-from aniso3d.renderer import Renderer
+from aniso3d.render import lod
+from aniso3d.render.camera import Camera
+from aniso3d.render.frame import FrameView
+from aniso3d.render.images import save_png
+from aniso3d.render.renderer import Renderer
+from aniso3d.render.splat import _FLOATS, ATTRIB_PER_ROW
 
 BEGIN, END = "<!-- bench_lod:begin -->", "<!-- bench_lod:end -->"
 DISTANCES = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)

@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 
 import aniso3d
-from aniso3d.camera import Camera
-from aniso3d.renderer import Renderer
-from aniso3d.texture import AnisoTexture
+from aniso3d.build.texture import AnisoTexture
+from aniso3d.render.camera import Camera
+from aniso3d.render.renderer import Renderer
 
 
 def frame_times(r: Renderer, thing, cam: Camera, method: str, frames: int, **opts):

@@ -7,7 +7,7 @@ killed run leaves an earlier output intact and no half-written file, and
 aniso3d never writes over its input. A build that cannot fit in memory is
 refused with the estimate and what to change.
 
-Most runs go through ``aniso3d.cli.main`` in-process; a few are real
+Most runs go through ``aniso3d.app.cli.main`` in-process; a few are real
 subprocesses (signals, a clean interpreter). Loading and option errors are
 raised before any OpenGL context is made, so nothing here needs a GPU except
 where marked.
@@ -30,12 +30,12 @@ import numpy as np
 import pytest
 import trimesh
 
-import aniso3d.texture
-import aniso3d.util
+import aniso3d.build.texture
+import aniso3d.files
 from aniso3d import AnisoTexture, build_texture, scenes
-from aniso3d.cli import main
+from aniso3d.app.cli import main
 
-EXE = [sys.executable, "-m", "aniso3d.cli"]
+EXE = [sys.executable, "-m", "aniso3d.app.cli"]
 
 
 def run(argv, capsys) -> tuple[int, str, str]:
@@ -330,12 +330,12 @@ def test_build_that_cannot_fit_is_refused_up_front(tmp_path, capsys, monkeypatch
     # 1 GiB available and K = 4096 on the default tree at 256^3: the
     # density spheres alone are several GiB. Refused after loading, in well
     # under a second of work, with the estimate and what to lower.
-    monkeypatch.setattr(aniso3d.texture, "_available_memory", lambda: 2**30)
+    monkeypatch.setattr(aniso3d.build.texture, "_available_memory", lambda: 2**30)
 
     def must_not_clip(*a, **k):
         raise AssertionError("clipping started on a build that cannot fit")
 
-    monkeypatch.setattr(aniso3d.texture, "clip_to_grid", must_not_clip)
+    monkeypatch.setattr(aniso3d.build.texture, "clip_to_grid", must_not_clip)
     out = tmp_path / "tree.a3d"
     t0 = time.perf_counter()
     code, stdout, err = run(["build", "-o", out, "-r", 256, "-k", 4096, "-q"], capsys)
@@ -359,7 +359,7 @@ def test_exact_check_after_clipping_refuses_before_the_big_arrays(monkeypatch):
     # centroids, which cannot overcount: 12 big triangles of a cube have 12.
     # Once clipping has found the real 23816 voxels, K = 1024 needs ~0.2 GiB
     # of density alone: refused there, before the density array exists.
-    from aniso3d.texture import _build_bytes, estimate_build_bytes
+    from aniso3d.build.texture import _build_bytes, estimate_build_bytes
 
     cube = scenes.cube(1.0)
     up_front = estimate_build_bytes(cube, 64, 1024)
@@ -373,7 +373,7 @@ def test_exact_check_after_clipping_refuses_before_the_big_arrays(monkeypatch):
             raise AssertionError("allocated the density spheres of a build that cannot fit")
         return real_zeros(shape, *a, **k)
 
-    monkeypatch.setattr(aniso3d.texture.np, "zeros", no_density)
+    monkeypatch.setattr(aniso3d.build.texture.np, "zeros", no_density)
     with pytest.raises(
         aniso3d.InputError, match="needs an estimated .* GiB, more than the .* GiB available"
     ):
@@ -389,7 +389,7 @@ def test_memory_estimate_is_an_upper_bound_of_the_real_peak():
     # above it (else builds that fit are refused): measured with tracemalloc.
     import tracemalloc
 
-    from aniso3d.texture import _build_bytes
+    from aniso3d.build.texture import _build_bytes
 
     for mesh, res, k in [
         (scenes.tree(levels=4, leaves_per_twig=20), 64, 256),
@@ -419,7 +419,7 @@ def small_mesh(tmp_path):
 
 def _fail_midway(monkeypatch, exc):
     """Make every atomic write die after some bytes have gone out."""
-    real = aniso3d.util.os.fdopen
+    real = aniso3d.files.os.fdopen
 
     class Dying(io.RawIOBase):
         def __init__(self, fh):
@@ -456,7 +456,7 @@ def _fail_midway(monkeypatch, exc):
                 self.fh.close()
                 super().close()
 
-    monkeypatch.setattr(aniso3d.util.os, "fdopen", lambda fd, mode: Dying(real(fd, mode)))
+    monkeypatch.setattr(aniso3d.files.os, "fdopen", lambda fd, mode: Dying(real(fd, mode)))
 
 
 @pytest.mark.parametrize("suffix", [".a3d", ".ply"])
@@ -505,7 +505,7 @@ def slow(*a, **k):
     print("WRITING", flush=True)
     time.sleep(60)
 numpy.save = slow
-from aniso3d.cli import main
+from aniso3d.app.cli import main
 sys.exit(main(sys.argv[1:]))
 """
 

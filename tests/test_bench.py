@@ -11,8 +11,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from aniso3d import bench, cli, scenes
-from aniso3d.camera import Camera
+from aniso3d import scenes
+from aniso3d.app import cli
+from aniso3d.bench import cli_tmp as bench
+from aniso3d.render.camera import Camera
 
 # ------------------------------------------------------------ without a GPU
 
@@ -150,9 +152,9 @@ def test_case_render_options():
 
 
 def test_missing_renderer_is_skipped_other_errors_fail():
-    exc = ModuleNotFoundError("No module named 'aniso3d.render_splat'", name="aniso3d.render_splat")
+    exc = ModuleNotFoundError("No module named 'aniso3d.render.splat'", name="aniso3d.render.splat")
     status, reason = bench.classify_failure(exc, "splat")
-    assert status == "skipped" and "render_splat" in reason
+    assert status == "skipped" and "render.splat" in reason
     assert bench.classify_failure(NotImplementedError("soon"), "volume")[0] == "skipped"
     assert bench.classify_failure(ValueError("bad"), "volume") == ("failed", "ValueError: bad")
     other = ModuleNotFoundError("No module named 'numpy'", name="numpy")
@@ -178,8 +180,8 @@ def test_csv_and_json_keep_every_column_and_mark_unmeasured_values():
 
 @pytest.fixture(scope="module")
 def gl_available():
-    from aniso3d.context import GLContext
     from aniso3d.errors import ResourceError
+    from aniso3d.render.context import GLContext
 
     try:
         GLContext().release()
@@ -248,14 +250,14 @@ def test_bench_smoke_end_to_end(gl_available, tmp_path, capsys):
 
 @pytest.mark.gpu
 def test_unavailable_renderer_is_recorded_as_skipped(gl_available, tmp_path, monkeypatch):
-    from aniso3d.renderer import Renderer
+    from aniso3d.render.renderer import Renderer
 
     real = Renderer.method_renderer
 
     def no_splat(self, method):
         if method == "splat":
             raise ModuleNotFoundError(
-                "No module named 'aniso3d.render_splat'", name="aniso3d.render_splat"
+                "No module named 'aniso3d.render.splat'", name="aniso3d.render.splat"
             )
         return real(self, method)
 
@@ -265,7 +267,7 @@ def test_unavailable_renderer_is_recorded_as_skipped(gl_available, tmp_path, mon
     mesh = scenes.tree(levels=4, leaves_per_twig=20)
     result = bench.run_bench(mesh, settings, with_flip=False)
     splat = [r for r in result.rows if r["method"] == "splat"]
-    assert splat and all(r["status"] == "skipped" and "render_splat" in r["reason"] for r in splat)
+    assert splat and all(r["status"] == "skipped" and "render.splat" in r["reason"] for r in splat)
     assert all(r["status"] == "ok" for r in result.rows if r["method"] != "splat")
     # Built and counted even when not drawn (level-of-detail points are made by
     # the renderer, so they have no separate point set).

@@ -1,4 +1,4 @@
-"""`aniso3d build`: in-process through aniso3d.cli.main, plus real subprocesses."""
+"""`aniso3d build`: in-process through aniso3d.app.cli.main, plus real subprocesses."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from aniso3d import AnisoTexture, PointCloud, build_texture, load_mesh, scenes
-from aniso3d.cli import main
+from aniso3d.app.cli import main
 
 TABLE_ROWS = ("triangles", "sub-polygons", "occupied voxels", "bytes: texture", "seconds: clip")
 
@@ -154,12 +154,12 @@ def test_texture_as_input_is_refused(tmp_path, capsys):
 
 
 def test_output_folder_is_checked_before_building(mesh_file, tmp_path, capsys, monkeypatch):
-    import aniso3d.texture
+    import aniso3d.build.texture
 
     def must_not_build(*a, **k):
         raise AssertionError("built a texture that could never be written")
 
-    monkeypatch.setattr(aniso3d.texture, "build_texture", must_not_build)
+    monkeypatch.setattr(aniso3d.build.texture, "build_texture", must_not_build)
     code, _, err = run(["build", mesh_file, "-o", tmp_path / "missing" / "x.a3d", "-q"], capsys)
     assert code == 2
     assert_one_line_error(err, "does not exist")
@@ -170,7 +170,7 @@ def test_output_folder_is_checked_before_building(mesh_file, tmp_path, capsys, m
 
 
 def test_write_failure_is_one_line_and_keeps_the_old_file(mesh_file, tmp_path, capsys, monkeypatch):
-    import aniso3d.util
+    import aniso3d.files
 
     out = tmp_path / "keep.a3d"
     out.write_bytes(b"old")
@@ -178,7 +178,7 @@ def test_write_failure_is_one_line_and_keeps_the_old_file(mesh_file, tmp_path, c
     def disk_full(fd):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(aniso3d.util.os, "fsync", disk_full)
+    monkeypatch.setattr(aniso3d.files.os, "fsync", disk_full)
     code, _, err = run(["build", mesh_file, "-o", out, "-r", 4, "-k", 4, "-q"], capsys)
     assert code == 2
     assert_one_line_error(err, "No space left on device", str(out))
@@ -190,7 +190,7 @@ def test_write_failure_is_one_line_and_keeps_the_old_file(mesh_file, tmp_path, c
 
 
 def test_subprocess_build_and_bad_option(mesh_file, tmp_path):
-    exe = [sys.executable, "-m", "aniso3d.cli"]
+    exe = [sys.executable, "-m", "aniso3d.app.cli"]
     out = tmp_path / "sub.a3d"
     ok = subprocess.run(
         [*exe, "build", str(mesh_file), "-o", str(out), "-r", "8", "-k", "8"],

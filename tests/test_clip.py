@@ -1,6 +1,6 @@
 """Stage 2: exact clipping of triangles into half-open voxel cells.
 
-Everything here calls :func:`aniso3d.clip.clip_to_grid` directly, in grid
+Everything here calls :func:`aniso3d.build.clip.clip_to_grid` directly, in grid
 coordinates (cell (i, j, k) is [i, i+1) x [j, j+1) x [k, k+1)), so areas are
 in units of h^2 and the expected values are exact numbers.
 """
@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from aniso3d import InputError, scenes
-from aniso3d.clip import clip_to_grid, make_grid, triangle_normals
+from aniso3d.build.clip import clip_to_grid, make_grid, triangle_normals
 
 EPS = np.finfo(np.float64).eps
 

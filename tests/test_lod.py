@@ -6,10 +6,12 @@ import numpy as np
 import pytest
 
 from aniso3d import scenes
-from aniso3d.camera import Camera
-from aniso3d.clip import make_grid
+from aniso3d.build.clip import make_grid
+from aniso3d.build.mesh import Mesh
+from aniso3d.build.texture import AnisoTexture, build_texture
 from aniso3d.errors import InputError
-from aniso3d.lod import (
+from aniso3d.render.camera import Camera
+from aniso3d.render.lod import (
     Pyramid,
     adaptive_points,
     as_pyramid,
@@ -18,8 +20,6 @@ from aniso3d.lod import (
     select_voxels,
     selection_ranges,
 )
-from aniso3d.mesh import Mesh
-from aniso3d.texture import AnisoTexture, build_texture
 
 K = 32
 

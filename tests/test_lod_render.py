@@ -19,9 +19,9 @@ from test_viewer import Session, drawn, mean_diff, xserver  # noqa: F401
 
 import aniso3d
 from aniso3d import InputError
-from aniso3d.camera import Camera, turntable
-from aniso3d.lod import LodPoints, describe_stats, pyramid
 from aniso3d.metrics import psnr, ssim
+from aniso3d.render.camera import Camera, turntable
+from aniso3d.render.lod import LodPoints, describe_stats, pyramid
 
 SIZE = (128, 128)
 
@@ -299,7 +299,7 @@ def test_cli_render_and_frames_take_lod(tmp_path):
     import sys
 
     def cli(*args):
-        cmd = [sys.executable, "-m", "aniso3d.cli", *args, "--backend", "egl"]
+        cmd = [sys.executable, "-m", "aniso3d.app.cli", *args, "--backend", "egl"]
         out = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
         if out.returncode != 0 and "EGL" in out.stderr:
             pytest.skip(f"no OpenGL through EGL: {out.stderr.strip()}")

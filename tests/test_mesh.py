@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from aniso3d import InputError, Mesh, load_mesh, scenes
-from aniso3d.mesh import DEFAULT_KD, DEFAULT_KS, DEFAULT_SHININESS, MAX_SHININESS, concatenate
+from aniso3d.build.mesh import DEFAULT_KD, DEFAULT_KS, DEFAULT_SHININESS, MAX_SHININESS, concatenate
 
 BYTE = 1.0 / 255 + 1e-7  # colours pass through 8-bit storage in most formats
 
@@ -314,7 +314,7 @@ def test_tree_rejects_bad_parameters(kwargs):
 
 @pytest.mark.parametrize("axis", [0, 1, 2])
 def test_quad_faces_its_axis(axis):
-    from aniso3d.clip import triangle_normals
+    from aniso3d.build.clip import triangle_normals
 
     q = scenes.quad(size=3.0, center=(1, 2, 3), normal_axis=axis)
     n, _ = triangle_normals(q.triangles)
@@ -326,7 +326,7 @@ def test_quad_faces_its_axis(axis):
 
 
 def test_cube_and_sphere():
-    from aniso3d.clip import triangle_normals
+    from aniso3d.build.clip import triangle_normals
 
     c = scenes.cube(size=2.0, center=(1, 1, 1))
     assert c.area() == pytest.approx(24.0)

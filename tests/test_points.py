@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from aniso3d import FormatError, InputError, Mesh, PointCloud, build_texture, scenes
-from aniso3d.mesh import concatenate
+from aniso3d.build.mesh import concatenate
 
 UNIT_BOX = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
 

@@ -13,12 +13,12 @@ import pytest
 
 import aniso3d
 from aniso3d import InputError, ResourceError
-from aniso3d.camera import Camera
-from aniso3d.clip import clip_to_grid, triangle_normals
-from aniso3d.frame import FrameView
-from aniso3d.images import save_png
-from aniso3d.mesh import concatenate
-from aniso3d.render_volume import (
+from aniso3d.build.clip import clip_to_grid, triangle_normals
+from aniso3d.build.mesh import concatenate
+from aniso3d.render.camera import Camera
+from aniso3d.render.frame import FrameView
+from aniso3d.render.images import save_png
+from aniso3d.render.volume import (
     BRICK,
     density_along,
     direction_weights,

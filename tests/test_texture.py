@@ -21,7 +21,7 @@ from aniso3d import (
     scenes,
     sphere_directions,
 )
-from aniso3d.clip import clip_to_grid, make_grid, triangle_normals
+from aniso3d.build.clip import clip_to_grid, make_grid, triangle_normals
 
 UNIT_BOX = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
 
@@ -378,7 +378,7 @@ def test_opposite_facets_keep_separate_entries_and_cancel_in_mean_normal():
     # A two-sided sheet: the same square twice, facing +z and -z.
     up = square(2, 0.5, 0.0, 1.0)
     down = square(2, 0.5, 0.0, 1.0, flip=True)
-    from aniso3d.mesh import concatenate
+    from aniso3d.build.mesh import concatenate
 
     tex = build_texture(concatenate([up, down]), 1, 16, bounds=UNIT_BOX)
     assert tex.n_entries == 2
@@ -414,7 +414,7 @@ def test_progress_and_timings():
 
 
 def test_batching_does_not_change_the_result(monkeypatch):
-    import aniso3d.texture as texture
+    import aniso3d.build.texture as texture
 
     mesh = small_tree()
     whole = build_texture(mesh, 16, 16)
@@ -614,12 +614,12 @@ def test_failed_save_leaves_no_temp_file_and_keeps_the_old_file(saved, tmp_path,
     tex, path = saved
     target = tmp_path / "keep.a3d"
     target.write_bytes(b"precious")
-    import aniso3d.util
+    import aniso3d.files
 
     def broken_fsync(fd):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(aniso3d.util.os, "fsync", broken_fsync)
+    monkeypatch.setattr(aniso3d.files.os, "fsync", broken_fsync)
     with pytest.raises(OSError, match="No space"):
         tex.save(target)
     assert target.read_bytes() == b"precious"

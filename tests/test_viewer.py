@@ -23,10 +23,7 @@ import numpy as np
 import pytest
 
 from aniso3d import ResourceError, scenes
-from aniso3d.context import GLContext
-from aniso3d.images import load_png
-from aniso3d.renderer import Renderer
-from aniso3d.viewer import (
+from aniso3d.app.viewer import (
     CONTROLS,
     DEGREES_PER_PIXEL,
     HOME_AZIMUTH,
@@ -35,6 +32,9 @@ from aniso3d.viewer import (
     Orbit,
     step_resolution,
 )
+from aniso3d.render.context import GLContext
+from aniso3d.render.images import load_png
+from aniso3d.render.renderer import Renderer
 
 BOX = np.array([[-1.0, -2.0, -1.0], [1.0, 2.0, 1.0]])
 
@@ -129,7 +129,7 @@ def test_wrapped_context_releases_its_objects_but_not_the_context():
 
 
 def _cli(args, env, timeout=60):
-    cmd = [sys.executable, "-m", "aniso3d.cli", *args]
+    cmd = [sys.executable, "-m", "aniso3d.app.cli", *args]
     return subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout)
 
 
@@ -196,7 +196,7 @@ class Session:
         self.folder = folder
         self.log_path = folder / "viewer.log"
         self._log = open(self.log_path, "w")
-        cmd = [sys.executable, "-m", "aniso3d.cli", "view", *args, "--screenshot-dir", str(folder)]
+        cmd = [sys.executable, "-m", "aniso3d.app.cli", "view", *args, "--screenshot-dir", str(folder)]
         self.proc = subprocess.Popen(cmd, stdout=self._log, stderr=subprocess.STDOUT, env=self.env)
         self.shots = 0
         try:
@@ -300,7 +300,7 @@ def test_display_without_opengl_33_is_a_clear_message_and_status_2(xserver):
     # Mesa caps its OpenGL version by this variable: a display with GL 3.0 only.
     env = dict(os.environ, DISPLAY=xserver, MESA_GL_VERSION_OVERRIDE="3.0")
     env.pop("WAYLAND_DISPLAY", None)
-    proc = subprocess.Popen([sys.executable, "-m", "aniso3d.cli", "view", "scene:cube"], env=env,
+    proc = subprocess.Popen([sys.executable, "-m", "aniso3d.app.cli", "view", "scene:cube"], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
     try:
         out, err = proc.communicate(timeout=30)

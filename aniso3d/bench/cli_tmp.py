@@ -59,7 +59,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
+from aniso3d.errors import InputError
 
 # ------------------------------------------------------------------ settings
 
@@ -282,7 +282,7 @@ def make_cameras(bounds: np.ndarray, settings: Settings) -> list[CameraSpec]:
     ``h * H / (2 d tan(fov / 2))`` pixels at distance d, so the distance for a
     footprint f is the frame-filling one times ``footprint_at_fill / f``.
     """
-    from .camera import Camera
+    from aniso3d.render.camera import Camera
 
     b = np.asarray(bounds, dtype=np.float64)
     h0 = float(np.max(b[1] - b[0])) / settings.baseline["resolution"]
@@ -446,7 +446,7 @@ COLUMNS = (
 
 def classify_failure(exc: BaseException, method: str) -> tuple[str, str]:
     """("skipped", why) when the renderer is not available, else ("failed", what)."""
-    if isinstance(exc, ModuleNotFoundError) and (exc.name or "").startswith("aniso3d.render_"):
+    if isinstance(exc, ModuleNotFoundError) and (exc.name or "").startswith("aniso3d.render."):
         return "skipped", f"renderer '{method}' not available yet (module {exc.name} is missing)"
     if isinstance(exc, NotImplementedError):
         return "skipped", f"renderer '{method}' not implemented yet: {exc}".rstrip(": ")
@@ -514,7 +514,7 @@ def _downfilter_cpu(size: tuple[int, int], ssaa: int, repeats: int = 3) -> float
     filter's own CPU time varies by some 20% between runs."""
     if ssaa <= 1:
         return 0.0
-    from .renderer import _downsample  # the very filter render() applies
+    from aniso3d.render.renderer import _downsample  # the very filter render() applies
 
     # Filled (not lazily zero-mapped) and flipped like the read-back frame.
     raw = np.full((size[1] * ssaa, size[0] * ssaa, 4), 128, np.uint8)[::-1]
@@ -556,10 +556,10 @@ def run_bench(
     backend: str = "auto",
 ) -> BenchResult:
     """Measure every case of :func:`plan_cases` for ``mesh``; see the module docstring."""
-    from . import metrics
-    from .context import GLContext
-    from .renderer import Renderer
-    from .texture import build_texture
+    from aniso3d import metrics
+    from aniso3d.build.texture import build_texture
+    from aniso3d.render.context import GLContext
+    from aniso3d.render.renderer import Renderer
 
     report = progress or (lambda fraction, stage: None)
     if with_flip is None:
@@ -1653,7 +1653,7 @@ def write_outputs(
 ) -> tuple[list[Path], list[str]]:
     """Write CSV, JSON, plots and report.md into ``outdir`` (atomically, never
     over an input); returns the paths written and notes for the user."""
-    from .util import atomic_write, refuse_overwriting_input
+    from aniso3d.files import atomic_write, refuse_overwriting_input
 
     notes: list[str] = []
     written: list[Path] = []
@@ -1664,7 +1664,7 @@ def write_outputs(
         written.append(atomic_write(path, data))
 
     if not result.meta["flip"]:
-        from .metrics import FLIP_MISSING
+        from aniso3d.metrics import FLIP_MISSING
 
         notes.append(FLIP_MISSING + "; errors are ranked by 1 - SSIM instead.")
     put("results.csv", to_csv(result.rows))
@@ -1694,7 +1694,7 @@ def write_outputs(
 
 
 def register(subparsers) -> None:
-    from .cli import image_size, positive_int
+    from aniso3d.app.common import image_size, positive_int
 
     p = subparsers.add_parser(
         "bench",
@@ -1750,8 +1750,8 @@ def register(subparsers) -> None:
 
 
 def cmd_bench(args) -> int:
-    from .cli import Progress, load_input
-    from .mesh import Mesh
+    from aniso3d.app.common import Progress, load_input
+    from aniso3d.build.mesh import Mesh
 
     settings = PRESETS["smoke" if args.smoke else "quick" if args.quick else "full"]
     overrides = {}

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyrr
 
-from .errors import InputError
+from aniso3d.errors import InputError
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,7 @@ cloud and returns an (H, W, 3) uint8 image (row 0 at the top). Conversions
 and are reused across frames.
 
 ``lod=True`` (methods "splat" and "volume", a mesh or texture) draws from the
-texture's exact pyramid (:mod:`aniso3d.lod`), built and uploaded once: splats
+texture's exact pyramid (:mod:`aniso3d.render.lod`), built and uploaded once: splats
 select per frame, per region, the coarsest level whose voxels cover at most
 ``pixel_error`` framebuffer pixels and draw only those points; the volume
 renderer marches, per frame, the one level fine enough at the object's
@@ -23,15 +23,15 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
-from .camera import Camera
-from .context import GLContext
-from .errors import InputError
-from .frame import FrameView
-from .lighting import Lighting
-from .lod import LodPoints, Pyramid, pyramid
-from .mesh import Mesh
-from .points import PointCloud
-from .texture import DEFAULT_DIRECTIONS, DEFAULT_RESOLUTION, AnisoTexture, build_texture
+from aniso3d.build.mesh import Mesh
+from aniso3d.build.points import PointCloud
+from aniso3d.build.texture import DEFAULT_DIRECTIONS, DEFAULT_RESOLUTION, AnisoTexture, build_texture
+from aniso3d.errors import InputError
+from aniso3d.render.camera import Camera
+from aniso3d.render.context import GLContext
+from aniso3d.render.frame import FrameView
+from aniso3d.render.lighting import Lighting
+from aniso3d.render.lod import LodPoints, Pyramid, pyramid
 
 METHODS = ("mesh", "volume", "splat")
 
@@ -104,11 +104,11 @@ class Renderer:
         impl = self._impl.get(method)
         if impl is None:
             if method == "mesh":
-                from .render_mesh import MeshRenderer as cls
+                from aniso3d.render.polygon import MeshRenderer as cls
             elif method == "splat":
-                from .render_splat import SplatRenderer as cls
+                from aniso3d.render.splat import SplatRenderer as cls
             else:
-                from .render_volume import VolumeRenderer as cls
+                from aniso3d.render.volume import VolumeRenderer as cls
             impl = self._impl[method] = cls(self.gl)
         return impl
 
@@ -309,7 +309,7 @@ class Renderer:
         **options,
     ) -> list[Path]:
         """Render one frame per camera to numbered PNG files in ``folder``."""
-        from .images import save_png
+        from aniso3d.render.images import save_png
 
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)

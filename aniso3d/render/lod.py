@@ -32,10 +32,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .camera import Camera
-from .errors import InputError
-from .points import PointCloud
-from .texture import PLACEMENTS, POINT_NORMALS, AnisoTexture, _tangent_basis
+from aniso3d.build.points import PointCloud
+from aniso3d.build.texture import PLACEMENTS, POINT_NORMALS, AnisoTexture, _tangent_basis
+from aniso3d.errors import InputError
+from aniso3d.render.camera import Camera
 
 #: Area (units of h^2) that one point of a perfectly flat patch may carry: the
 #: largest plane section of a unit cube is sqrt(2), so a flat patch inside one
@@ -48,7 +48,7 @@ FLAT_AREA = math.sqrt(2.0)
 
 class Pyramid(list):
     """The levels of a texture pyramid, finest first (a ``list`` of
-    :class:`~aniso3d.texture.AnisoTexture`), with the parent/child links
+    :class:`~aniso3d.build.texture.AnisoTexture`), with the parent/child links
     between consecutive levels kept for fast per-frame selection.
 
     ``self[0]`` is the finest texture itself; ``self[l]`` has voxel edge
@@ -708,7 +708,7 @@ def select_points(
 @dataclass(frozen=True, eq=False)
 class LodPoints:
     """A pyramid and the point options to draw it view-dependently with: what
-    :meth:`SplatRenderer.upload <aniso3d.render_splat.SplatRenderer.upload>`
+    :meth:`SplatRenderer.upload <aniso3d.render.splat.SplatRenderer.upload>`
     takes to upload every level's points once and draw, per frame, only
     those :func:`select_voxels` chooses.
 

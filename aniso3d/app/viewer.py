@@ -15,7 +15,7 @@ Layers, top down:
   GL work stays on the main thread: a finished conversion is uploaded on the
   next frame.
 - :class:`Orbit` is the camera control (orbit, pan, zoom, turntable), plain
-  arithmetic on top of :class:`~aniso3d.camera.Camera`, testable without a
+  arithmetic on top of :class:`~aniso3d.render.camera.Camera`, testable without a
   window.
 
 A renderer whose module is missing (or fails to start) is reported on screen
@@ -47,12 +47,12 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
-from .camera import Camera
-from .errors import InputError, ResourceError
-from .lod import LodPoints, Pyramid, describe_stats, pyramid
-from .mesh import Mesh
-from .points import PointCloud
-from .texture import DEFAULT_DIRECTIONS, PLACEMENTS, AnisoTexture, build_texture
+from aniso3d.build.mesh import Mesh
+from aniso3d.build.points import PointCloud
+from aniso3d.build.texture import DEFAULT_DIRECTIONS, PLACEMENTS, AnisoTexture, build_texture
+from aniso3d.errors import InputError, ResourceError
+from aniso3d.render.camera import Camera
+from aniso3d.render.lod import LodPoints, Pyramid, describe_stats, pyramid
 
 METHODS = ("mesh", "volume", "splat")
 METHOD_LABELS = {"mesh": "polygons", "volume": "volume", "splat": "splats"}
@@ -284,7 +284,7 @@ class Settings:
     directions: int = DEFAULT_DIRECTIONS
     turntable: bool = False
     overlay: bool = True
-    lod: bool = False  # splats and volume from the texture's pyramid (aniso3d.lod)
+    lod: bool = False  # splats and volume from the texture's pyramid (aniso3d.render.lod)
 
 
 def _takes(impl, name: str) -> bool:
@@ -513,8 +513,8 @@ class Viewer:
         self.out = out or sys.stdout
         self.bounds = scene_bounds(thing)
 
-        from .context import GLContext
-        from .renderer import Renderer
+        from aniso3d.render.context import GLContext
+        from aniso3d.render.renderer import Renderer
 
         self.window, self.ctx = open_window(size, f"aniso3d view — {name}")
         try:
@@ -884,7 +884,7 @@ class Viewer:
             self._impl_error.pop(method, None)
             return impl, None
         except ModuleNotFoundError as exc:
-            if exc.name and exc.name.startswith("aniso3d.render_"):
+            if exc.name and exc.name.startswith("aniso3d.render."):
                 path = exc.name.replace(".", "/") + ".py"
                 msg = (
                     f"the {METHOD_LABELS[method]} renderer is not available yet ({path} is missing)"
@@ -971,7 +971,7 @@ class Viewer:
         return options, 2 if s.quality == "high" else 1
 
     def _render_scene(self) -> None:
-        from .frame import FrameView
+        from aniso3d.render.frame import FrameView
 
         self._dirty = False
         w, h = self.window.get_framebuffer_size()
@@ -1183,7 +1183,7 @@ class Viewer:
         return self.screenshot_dir / f"aniso3d-view-{n:03d}.png"
 
     def _save_screenshot(self) -> None:
-        from .images import save_png
+        from aniso3d.render.images import save_png
 
         w, h = self.window.get_framebuffer_size()
         raw = self.ctx.screen.read(viewport=(0, 0, w, h), components=3, alignment=1)

@@ -7,8 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .camera import Camera
-from .lighting import Lighting
+from aniso3d.render.camera import Camera
+from aniso3d.render.lighting import Lighting
 
 
 @dataclass(frozen=True)

@@ -30,11 +30,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .clip import Grid, clip_to_grid, make_grid, triangle_normals
-from .errors import FormatError, InputError
-from .mesh import Mesh, check_readable_file
-from .points import PointCloud
-from .util import atomic_write
+from aniso3d.build.clip import Grid, clip_to_grid, make_grid, triangle_normals
+from aniso3d.errors import FormatError, InputError
+from aniso3d.build.mesh import Mesh, check_readable_file
+from aniso3d.build.points import PointCloud
+from aniso3d.files import atomic_write
 
 #: Defaults chosen by measurement (docs/bench/report.md): K = 16 is as
 #: accurate as 64 or 256 for the volume and splat renderers (both read the
@@ -206,8 +206,8 @@ class AnisoTexture:
         return self.density[:, p] / np.abs(w).sum()
 
     def pyramid(self, max_levels: int | None = None):
-        """All coarser levels by exact aggregation: see :func:`aniso3d.lod.pyramid`."""
-        from .lod import pyramid
+        """All coarser levels by exact aggregation: see :func:`aniso3d.render.lod.pyramid`."""
+        from aniso3d.render.lod import pyramid
 
         return pyramid(self, max_levels)
 

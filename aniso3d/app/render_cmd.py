@@ -14,13 +14,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .camera import Camera, turntable
-from .cli import Progress, image_size, load_input, positive_float, positive_int
-from .errors import InputError
-from .lod import describe_stats
-from .mesh import Mesh
-from .points import PointCloud
-from .texture import DEFAULT_DIRECTIONS, DEFAULT_RESOLUTION, AnisoTexture
+from aniso3d.app.common import Progress, image_size, load_input, positive_float, positive_int
+from aniso3d.build.mesh import Mesh
+from aniso3d.build.points import PointCloud
+from aniso3d.build.texture import DEFAULT_DIRECTIONS, DEFAULT_RESOLUTION, AnisoTexture
+from aniso3d.errors import InputError
+from aniso3d.render.camera import Camera, turntable
+from aniso3d.render.lod import describe_stats
 
 PANEL_METHODS = ("mesh", "volume", "splat")
 
@@ -143,9 +143,9 @@ def default_method(thing) -> str:
 
 
 def cmd_render(args) -> int:
-    from .images import save_png
-    from .renderer import Renderer
-    from .util import refuse_overwriting_input
+    from aniso3d.files import refuse_overwriting_input
+    from aniso3d.render.images import save_png
+    from aniso3d.render.renderer import Renderer
 
     out = Path(args.output)
     if out.suffix.lower() != ".png":
@@ -176,7 +176,7 @@ def cmd_render(args) -> int:
 
 def figure(r, thing, camera: Camera, args) -> tuple[np.ndarray, list[str]]:
     """The three renderings side by side with labels, and one text row each."""
-    from .images import label_panels
+    from aniso3d.render.images import label_panels
 
     panels, labels, rows = [], [], []
     truth = None
@@ -203,7 +203,7 @@ def figure(r, thing, camera: Camera, args) -> tuple[np.ndarray, list[str]]:
         row = f"{names[method]:<22} {ms:8.1f} ms"
         lod_text = describe_stats(r.last_lod_stats)
         if truth is not None:
-            from .metrics import psnr
+            from aniso3d.metrics import psnr
 
             p = psnr(img, truth)
             text += f", PSNR {p:.1f} dB"
@@ -220,7 +220,7 @@ def figure(r, thing, camera: Camera, args) -> tuple[np.ndarray, list[str]]:
 
 
 def cmd_frames(args) -> int:
-    from .renderer import Renderer
+    from aniso3d.render.renderer import Renderer
 
     folder = Path(args.output)
     if folder.exists() and not folder.is_dir():

@@ -1,6 +1,6 @@
 """Renderer (a): the polygon model itself, per-face Phong, the ground truth.
 
-Supersampling is the frame's business (:class:`~aniso3d.renderer.Renderer`
+Supersampling is the frame's business (:class:`~aniso3d.render.renderer.Renderer`
 draws at ``ssaa`` times the size and box-filters); this module only draws.
 """
 
@@ -11,9 +11,9 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from .context import GLContext
-from .frame import FrameView
-from .mesh import Mesh
+from aniso3d.build.mesh import Mesh
+from aniso3d.render.context import GLContext
+from aniso3d.render.frame import FrameView
 
 
 @dataclass(eq=False)
@@ -29,7 +29,7 @@ class GPUMesh:
 
 
 class MeshRenderer:
-    """Draws a :class:`~aniso3d.mesh.Mesh` with flat face normals and two-sided Phong."""
+    """Draws a :class:`~aniso3d.build.mesh.Mesh` with flat face normals and two-sided Phong."""
 
     method = "mesh"
 

@@ -68,12 +68,12 @@ from dataclasses import dataclass, field
 import moderngl
 import numpy as np
 
-from .context import GLContext
-from .errors import InputError, ResourceError
-from .frame import FrameView
-from .lighting import Lighting, shade_np
-from .lod import Pyramid, volume_level
-from .texture import AnisoTexture
+from aniso3d.build.texture import AnisoTexture
+from aniso3d.errors import InputError, ResourceError
+from aniso3d.render.context import GLContext
+from aniso3d.render.frame import FrameView
+from aniso3d.render.lighting import Lighting, shade_np
+from aniso3d.render.lod import Pyramid, volume_level
 
 #: Brick edge in voxels of the two-level index.
 BRICK = 8
@@ -423,7 +423,7 @@ class GPUVolume:
 class GPULodVolume:
     """Every level of a texture pyramid uploaded once (``levels[l]``, a
     :class:`GPUVolume` each); a frame ray-marches the one level
-    :func:`~aniso3d.lod.volume_level` picks. ``bounds`` covers every level's
+    :func:`~aniso3d.render.lod.volume_level` picks. ``bounds`` covers every level's
     grid, so the clip range does not depend on the level drawn.
     ``last_stats`` is the last frame's choice."""
 
@@ -439,8 +439,8 @@ class GPULodVolume:
 
 
 class VolumeRenderer:
-    """Ray-marches an :class:`~aniso3d.texture.AnisoTexture` (one ray per pixel),
-    or per frame one level of a :class:`~aniso3d.lod.Pyramid`."""
+    """Ray-marches an :class:`~aniso3d.build.texture.AnisoTexture` (one ray per pixel),
+    or per frame one level of a :class:`~aniso3d.render.lod.Pyramid`."""
 
     method = "volume"
 
@@ -461,7 +461,7 @@ class VolumeRenderer:
         }
         self.prog = gl.program("volume.vert", "volume.frag", defines=defines)
         self.vao = gl.track(ctx.vertex_array(self.prog, []))
-        #: The last pyramid frame's level choice (see :func:`~aniso3d.lod.volume_level`).
+        #: The last pyramid frame's level choice (see :func:`~aniso3d.render.lod.volume_level`).
         self.last_lod_stats: dict | None = None
 
     def upload(self, texture: AnisoTexture | Pyramid) -> GPUVolume | GPULodVolume:
@@ -534,7 +534,7 @@ class VolumeRenderer:
         read), ``normal`` "mean" | "sample" (the shading normal of an entry),
         ``opacity`` "exponential" | "linear" (how coverage adds up along the
         ray; see the module docstring). A pyramid upload
-        (:class:`GPULodVolume`) draws the level :func:`~aniso3d.lod.volume_level`
+        (:class:`GPULodVolume`) draws the level :func:`~aniso3d.render.lod.volume_level`
         picks for ``pixel_error`` (framebuffer pixels, default 1).
         """
         if unknown:

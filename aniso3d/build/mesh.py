@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
+from aniso3d.errors import InputError
 
 #: Diffuse reflectance of faces whose file carries no colour (a light grey).
 DEFAULT_KD = (0.7, 0.7, 0.7)

@@ -6,7 +6,7 @@ Each point is a small flat shape in its tangent plane, sized from its area:
 - ``disc``: radius ``sqrt(area / pi) * size_factor``;
 - ``ellipse``: the disc stretched by ``sqrt(aspect)`` along the point's first
   tangent axis and shrunk by as much along the second (same area). A
-  :class:`~aniso3d.points.PointCloud` carries no anisotropy, so the axis is a
+  :class:`~aniso3d.build.points.PointCloud` carries no anisotropy, so the axis is a
   fixed function of the normal (:func:`tangent_frame`, the convention
   ``texture.to_points`` spreads points with) and ``aspect`` is an option; the
   ellipse is a well-defined shape, not a view-dependent stretch.
@@ -87,11 +87,11 @@ from dataclasses import dataclass, field
 import moderngl
 import numpy as np
 
-from .context import GLContext
-from .errors import InputError, ResourceError
-from .frame import FrameView
-from .lod import LodPoints, _ranges, select_voxels
-from .points import PointCloud
+from aniso3d.build.points import PointCloud
+from aniso3d.errors import InputError, ResourceError
+from aniso3d.render.context import GLContext
+from aniso3d.render.frame import FrameView
+from aniso3d.render.lod import LodPoints, _ranges, select_voxels
 
 SHAPES = ("square", "disc", "ellipse")
 QUALITIES = ("fast", "high", "blend")
@@ -327,11 +327,11 @@ class GPUPoints:
 
 @dataclass(eq=False)
 class GPULodPoints(GPUPoints):
-    """Every level of a pyramid's points (:class:`~aniso3d.lod.LodPoints`)
+    """Every level of a pyramid's points (:class:`~aniso3d.render.lod.LodPoints`)
     uploaded once, one after the other in one buffer (finest level first),
     each level's voxels in Morton order of their grid cells with every voxel's
     points contiguous. A frame draws only the voxels
-    :func:`~aniso3d.lod.select_voxels` chooses, through an index buffer
+    :func:`~aniso3d.render.lod.select_voxels` chooses, through an index buffer
     rewritten per frame (4 bytes per point drawn), in ascending order.
 
     ``bounds`` (and so the clip range) covers every level's points, whatever a
@@ -382,7 +382,7 @@ class _Targets:
 
 
 class SplatRenderer:
-    """Draws a :class:`~aniso3d.points.PointCloud` as perspective-exact splats.
+    """Draws a :class:`~aniso3d.build.points.PointCloud` as perspective-exact splats.
 
     ``quality="fast"``: one geometry pass writes each pixel's nearest splat
     (exact depth, point id), then one full-screen pass shades it with
@@ -485,7 +485,7 @@ class SplatRenderer:
         """Upload ``cloud`` once: float64 positions minus the cloud's centre,
         then float32, so far-off clouds keep their precision.
 
-        A :class:`~aniso3d.lod.LodPoints` uploads every level of its pyramid
+        A :class:`~aniso3d.render.lod.LodPoints` uploads every level of its pyramid
         (:class:`GPULodPoints`); :meth:`draw` then selects per frame."""
         if isinstance(cloud, LodPoints):
             return self._upload_lod(cloud)
@@ -596,7 +596,7 @@ class SplatRenderer:
         return handle
 
     def select(self, handle: GPULodPoints, view: FrameView, pixel_error: float = 1.0) -> dict:
-        """This frame's points of a pyramid upload: :func:`~aniso3d.lod.select_voxels`
+        """This frame's points of a pyramid upload: :func:`~aniso3d.render.lod.select_voxels`
         for the view's camera and framebuffer size (clip range ``view.near``
         to ``view.far``), their buffer indices written to the index buffer.
         Returns (and keeps as ``handle.last_stats`` and

@@ -13,7 +13,7 @@ import re
 from importlib import resources
 from pathlib import Path
 
-from .errors import Aniso3DError
+from aniso3d.errors import Aniso3DError
 
 MAX_INCLUDE_DEPTH = 8
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
@@ -32,7 +32,7 @@ def shader_dir() -> Path:
             return d
     except ModuleNotFoundError:
         pass
-    d = Path(__file__).resolve().parent.parent / "shaders"
+    d = Path(__file__).resolve().parents[2] / "shaders"
     if not d.exists():
         raise ShaderSourceError(f"GLSL folder not found (looked in {d}); reinstall aniso3d")
     return d

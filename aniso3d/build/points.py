@@ -2,7 +2,7 @@
 
 A :class:`PointCloud` is a plain data object: each point is a small oriented
 surface element with an area and a Phong material. aniso3d makes them from an
-:class:`~aniso3d.texture.AnisoTexture` (``texture.to_points()``), and reads and
+:class:`~aniso3d.build.texture.AnisoTexture` (``texture.to_points()``), and reads and
 writes them as binary PLY that other tools (trimesh, MeshLab, CloudCompare)
 open.
 """
@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import FormatError, InputError
-from .mesh import DEFAULT_KD, DEFAULT_KS, DEFAULT_SHININESS, MAX_SHININESS, check_readable_file
-from .util import atomic_write
+from aniso3d.errors import FormatError, InputError
+from aniso3d.build.mesh import DEFAULT_KD, DEFAULT_KS, DEFAULT_SHININESS, MAX_SHININESS, check_readable_file
+from aniso3d.files import atomic_write
 
 
 @dataclass(frozen=True, eq=False)
@@ -134,7 +134,7 @@ class PointCloud:
     def load_ply(cls, path: str | os.PathLike, default_area: float | None = None) -> PointCloud:
         """Read a PLY point cloud with normals (ours or another tool's).
 
-        Colours default to :data:`~aniso3d.mesh.DEFAULT_KD`. Files without an
+        Colours default to :data:`~aniso3d.build.mesh.DEFAULT_KD`. Files without an
         ``area`` property get one from ``default_area`` or, if that is None,
         from the mean spacing of the points (a square of the nearest-neighbour
         distance estimated from the bounding box and count).

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError
+from aniso3d.errors import InputError
 
 
 @dataclass(frozen=True, eq=False)

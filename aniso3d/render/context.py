@@ -15,8 +15,8 @@ from typing import Any
 
 import moderngl
 
-from .errors import ResourceError
-from .shaderlib import preprocess
+from aniso3d.errors import ResourceError
+from aniso3d.render.shader_source import preprocess
 
 log = logging.getLogger("aniso3d")
 

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
-from .util import atomic_write
+from aniso3d.errors import InputError
+from aniso3d.files import atomic_write
 
 
 def save_png(path: str | os.PathLike, image: np.ndarray) -> Path:

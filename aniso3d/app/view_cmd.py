@@ -1,6 +1,6 @@
-"""``aniso3d view``: the interactive window (see :mod:`aniso3d.viewer`).
+"""``aniso3d view``: the interactive window (see :mod:`aniso3d.app.viewer`).
 
-Registered by :func:`aniso3d.cli.build_parser`. Errors (a bad input, no
+Registered by :func:`aniso3d.app.cli.build_parser`. Errors (a bad input, no
 display, no OpenGL, pyglet missing) are :class:`~aniso3d.errors.Aniso3DError`
 and reach the user as one line and exit status 2.
 """
@@ -10,14 +10,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .cli import image_size, load_input, positive_int
+from aniso3d.app.common import image_size, load_input, positive_int
 
 METHOD_CHOICES = ("mesh", "volume", "splat")
 
 
 def register(sub) -> None:
-    from .texture import DEFAULT_DIRECTIONS
-    from .viewer import CONTROLS, DEFAULT_RESOLUTION, QUALITIES, SPLATS
+    from aniso3d.app.viewer import CONTROLS, DEFAULT_RESOLUTION, QUALITIES, SPLATS
+    from aniso3d.build.texture import DEFAULT_DIRECTIONS
 
     keys = "\n".join(f"  {k:<20}{a}" for k, a in CONTROLS)
     p = sub.add_parser(
@@ -51,7 +51,7 @@ def register(sub) -> None:
 
 
 def cmd_view(args) -> int:
-    from .viewer import Settings, check_display, run_viewer
+    from aniso3d.app.viewer import Settings, check_display, run_viewer
 
     check_display()  # no display: say so before spending time on loading
     thing = load_input(args.input)

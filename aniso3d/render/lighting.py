@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import InputError
+from aniso3d.errors import InputError
 
 MAX_LIGHTS = 4
 

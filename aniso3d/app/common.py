@@ -1,0 +1,126 @@
+"""What the commands share: argparse value types, the progress bar, and
+reading an input (mesh, texture, point cloud or built-in scene) by its suffix."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from aniso3d.errors import InputError
+
+TEXTURE_SUFFIX = ".a3d"
+
+
+
+def positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got '{text}'") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got '{text}'") from None
+    if not (value > 0 and value < float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a positive finite number, got {text}")
+    return value
+
+
+def image_size(text: str) -> tuple[int, int]:
+    """'800x600' or '512' (square)."""
+    parts = text.lower().split("x")
+    try:
+        dims = [int(p) for p in parts]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"image size must look like 800x600 or 512, got '{text}'") from None
+    if len(dims) == 1:
+        dims = dims * 2
+    if len(dims) != 2 or min(dims) < 1:
+        raise argparse.ArgumentTypeError(f"image size must be two numbers >= 1, got '{text}'")
+    if max(dims) > 16384:
+        raise argparse.ArgumentTypeError(f"image size {text} is above the maximum of 16384 pixels a side")
+    return dims[0], dims[1]
+
+
+class Progress:
+    """A one-line progress bar on stderr (silent when stderr is not a terminal
+    unless forced), for long builds and frame sequences."""
+
+    def __init__(self, label: str, enabled: bool | None = None, stream=None):
+        self.stream = stream or sys.stderr
+        self.enabled = self.stream.isatty() if enabled is None else enabled
+        self.label = label
+        self.t0 = time.perf_counter()
+        self._last = -1.0
+
+    def __call__(self, fraction: float, stage: str = "") -> None:
+        if not self.enabled:
+            return
+        fraction = min(max(fraction, 0.0), 1.0)
+        if fraction < 1.0 and fraction - self._last < 0.01:
+            return
+        self._last = fraction
+        width = 30
+        filled = int(round(width * fraction))
+        elapsed = time.perf_counter() - self.t0
+        self.stream.write(
+            f"\r{self.label} [{'#' * filled}{'.' * (width - filled)}] {100 * fraction:5.1f}% "
+            f"{stage:<10} {elapsed:6.1f}s"
+        )
+        if fraction >= 1.0:
+            self.stream.write("\n")
+        self.stream.flush()
+
+
+def load_input(path: str | None, scene_options: dict | None = None):
+    """A mesh, texture or point cloud from ``path`` by its suffix; the built-in
+    tree when ``path`` is None; ``scene:NAME`` for another built-in scene."""
+    from aniso3d.build import scenes
+    from aniso3d.build.mesh import load_mesh
+    from aniso3d.build.points import PointCloud
+    from aniso3d.build.texture import AnisoTexture
+
+    if path is None:
+        return scenes.tree(**(scene_options or {}))
+    if path.startswith("scene:"):
+        return scenes.get_scene(path.split(":", 1)[1])
+    suffix = Path(path).suffix.lower()
+    if suffix == TEXTURE_SUFFIX:
+        return AnisoTexture.load(path)
+    if suffix == ".ply" and ply_is_point_cloud(path):
+        return PointCloud.load_ply(path)
+    return load_mesh(path)
+
+
+def ply_is_point_cloud(path: str) -> bool:
+    """True if a PLY file declares no faces (or zero of them)."""
+    from aniso3d.build.mesh import check_readable_file
+
+    p = check_readable_file(path, "input")
+    with open(p, "rb") as fh:
+        head = fh.read(4096)
+    if not head.startswith(b"ply"):
+        raise InputError(f"'{path}' does not start with 'ply': it is not a PLY file")
+    for line in head.split(b"\n"):
+        parts = line.split()
+        if len(parts) == 3 and parts[0] == b"element" and parts[1] == b"face":
+            return parts[2] == b"0"
+        if line.strip() == b"end_header":
+            break
+    return True
+
+
+def format_bytes(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB"):
+        if n < 1024 or unit == "GiB":
+            return f"{n:.1f} {unit}" if unit != "B" else f"{int(n)} B"
+        n /= 1024
+    return f"{n:.1f} GiB"
