@@ -20,3 +20,17 @@ def r():
         pytest.skip(str(exc))
     yield renderer
     renderer.release()
+
+
+def pytest_addoption(parser):
+    parser.addoption(
+        "--regen-references",
+        action="store_true",
+        help="rewrite the reference images in tests/reference/ from the current renderers "
+        "(check the new PNGs by eye before committing them)",
+    )
+
+
+@pytest.fixture
+def regen_references(request) -> bool:
+    return bool(request.config.getoption("--regen-references"))
