@@ -12,7 +12,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-
 PACKAGE = Path(__file__).resolve().parents[1] / "aniso3d"
 
 #: Stages in data-flow order: a module may import from its own stage or an
