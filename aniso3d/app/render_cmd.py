@@ -20,7 +20,7 @@ from aniso3d.build.points import PointCloud
 from aniso3d.build.texture import DEFAULT_DIRECTIONS, DEFAULT_RESOLUTION, AnisoTexture
 from aniso3d.errors import InputError
 from aniso3d.render.camera import Camera, turntable
-from aniso3d.render.lod import describe_stats
+from aniso3d.render.select import describe_stats
 
 PANEL_METHODS = ("mesh", "volume", "splat")
 

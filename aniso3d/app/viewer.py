@@ -49,10 +49,11 @@ import numpy as np
 
 from aniso3d.build.mesh import Mesh
 from aniso3d.build.points import PointCloud
+from aniso3d.build.pyramid import LodPoints, Pyramid, pyramid
 from aniso3d.build.texture import DEFAULT_DIRECTIONS, PLACEMENTS, AnisoTexture, build_texture
 from aniso3d.errors import InputError, ResourceError
 from aniso3d.render.camera import Camera
-from aniso3d.render.lod import LodPoints, Pyramid, describe_stats, pyramid
+from aniso3d.render.select import describe_stats
 
 METHODS = ("mesh", "volume", "splat")
 METHOD_LABELS = {"mesh": "polygons", "volume": "volume", "splat": "splats"}
@@ -284,7 +285,7 @@ class Settings:
     directions: int = DEFAULT_DIRECTIONS
     turntable: bool = False
     overlay: bool = True
-    lod: bool = False  # splats and volume from the texture's pyramid (aniso3d.render.lod)
+    lod: bool = False  # splats and volume from the texture's pyramid (aniso3d.build.pyramid)
 
 
 def _takes(impl, name: str) -> bool:

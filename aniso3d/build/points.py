@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from aniso3d.errors import FormatError, InputError
 from aniso3d.build.mesh import DEFAULT_KD, DEFAULT_KS, DEFAULT_SHININESS, MAX_SHININESS, check_readable_file
+from aniso3d.errors import FormatError, InputError
 from aniso3d.files import atomic_write
 
 
