@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import plyfile
 import pytest
 
 from aniso3d import FormatError, InputError, Mesh, PointCloud, build_texture, scenes
@@ -178,8 +179,10 @@ def test_trimesh_opens_our_ply(tree_texture, tmp_path):
     assert isinstance(loaded, trimesh.PointCloud)
     assert len(loaded.vertices) == len(pc)
     np.testing.assert_allclose(loaded.vertices, pc.positions, rtol=1e-6, atol=1e-6)
-    raw = loaded.metadata["_ply_raw"]["vertex"]["data"]
+    # and plyfile, another reader, sees every property we wrote
+    raw = plyfile.PlyData.read(str(tmp_path / "pts.ply"))["vertex"].data
     assert {"nx", "ny", "nz", "area", "ks", "shininess", "red"} <= set(raw.dtype.names)
+    np.testing.assert_array_equal(raw["area"], pc.areas.astype(np.float32))
 
 
 def test_ply_without_normals_is_a_clear_input_error(tmp_path):

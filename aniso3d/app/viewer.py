@@ -47,6 +47,7 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
+from aniso3d.build.bounds import bounds_of
 from aniso3d.build.mesh import Mesh
 from aniso3d.build.points import PointCloud
 from aniso3d.build.pyramid import LodPoints, Pyramid, pyramid
@@ -110,23 +111,6 @@ def step_resolution(current: int, step: int) -> int:
 def cycle(options: tuple, current):
     return (
         options[(options.index(current) + 1) % len(options)] if current in options else options[0]
-    )
-
-
-def scene_bounds(thing) -> np.ndarray:
-    """(2, 3) world box of what is drawn: a texture's occupied voxels, not its
-    whole grid."""
-    if isinstance(thing, AnisoTexture):
-        if thing.n_voxels == 0:
-            raise InputError("the texture is empty (no occupied voxels): nothing to show")
-        c, h = np.asarray(thing.coords), float(thing.voxel_size)
-        return np.stack([thing.origin + c.min(0) * h, thing.origin + (c.max(0) + 1) * h])
-    if isinstance(thing, (Mesh, PointCloud)):
-        if isinstance(thing, PointCloud) and len(thing) == 0:
-            raise InputError("the point cloud is empty: nothing to show")
-        return np.asarray(thing.bounds, dtype=np.float64)
-    raise InputError(
-        f"cannot view a {type(thing).__name__}; give a mesh, a .a3d texture or a PLY point cloud"
     )
 
 
@@ -512,7 +496,7 @@ class Viewer:
                 f"screenshot folder '{self.screenshot_dir}' does not exist; create it first"
             )
         self.out = out or sys.stdout
-        self.bounds = scene_bounds(thing)
+        self.bounds = bounds_of(thing)
 
         from aniso3d.render.context import GLContext
         from aniso3d.render.renderer import Renderer

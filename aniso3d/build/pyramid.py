@@ -123,11 +123,6 @@ class Pyramid(list):
             self._clouds[key] = (cloud, offsets)
         return self._clouds[key]
 
-    def clear_cache(self) -> None:
-        """Forget cached level point clouds and adaptive counts."""
-        self._clouds.clear()
-        self._adaptive.clear()
-
     @property
     def nbytes(self) -> int:
         """Bytes of all levels, the shared sample directions counted once."""
