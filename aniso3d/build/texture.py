@@ -317,9 +317,10 @@ def entry_points(
             counts = None
     if counts is None:
         return pos, nrm, area, kd, ks, sh
-    src, offsets = _spread(pos, nrm, area, counts, h)
-    m = counts[src].astype(np.float64)
-    return pos[src] + offsets, nrm[src], area[src] / m, kd[src], ks[src], sh[src]
+    # np.repeat, not a gather by index: the same values, a contiguous copy.
+    rep = lambda a: np.repeat(a, counts, axis=0)  # noqa: E731
+    m = rep(counts).astype(np.float64)
+    return rep(pos) + _spread(nrm, area, counts, h), rep(nrm), rep(area) / m, rep(kd), rep(ks), rep(sh)
 
 
 def _check_count(value) -> None:
@@ -329,27 +330,23 @@ def _check_count(value) -> None:
         raise InputError(f"points per entry must be a whole number >= 1, got {value!r}")
 
 
-def _spread(
-    pos: np.ndarray, nrm: np.ndarray, area: np.ndarray, counts: np.ndarray, h: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Where the points of entries split into ``counts`` (P,) points each go:
-    ``(src, offsets)``, the (sum(counts),) index of each new point's entry
-    and its (sum(counts), 3) offset from the entry's position ``pos`` (P, 3).
+def _spread(nrm: np.ndarray, area: np.ndarray, counts: np.ndarray, h: float) -> np.ndarray:
+    """(sum(counts), 3) offsets of the points of entries split into ``counts``
+    (P,) points each from the entry's position, entry by entry.
 
-    Point i of m lies on a Vogel spiral in the entry's tangent plane (normal
-    ``nrm``) at radius ``R sqrt((i + 0.5) / m)``, R the radius of a disc of
-    the entry's ``area`` but at most h/2 (inside the voxel), so the points
-    cover the disc evenly.
+    Point i of m lies on a Vogel spiral in the entry's tangent plane (unit
+    normal ``nrm`` (P, 3)) at radius ``R sqrt((i + 0.5) / m)``, R the radius of
+    a disc of the entry's ``area`` (P,) but at most h/2 (inside the voxel), so
+    the points cover the disc evenly.
     """
     t, b = tangent_frame(nrm)
-    src = np.repeat(np.arange(len(counts)), counts)
+    rep = lambda a: np.repeat(a, counts, axis=0)  # noqa: E731
     i = ranges(np.zeros_like(counts), counts).astype(np.float64)
-    m = counts[src].astype(np.float64)
+    m = rep(counts).astype(np.float64)
     r = np.sqrt((i + 0.5) / m)
     ang = i * np.pi * (3.0 - np.sqrt(5.0))
-    radius = np.minimum(np.sqrt(area / np.pi), 0.5 * h)[src]
-    along_t = (radius * r * np.cos(ang))[:, None] * t[src]
-    return src, along_t + (radius * r * np.sin(ang))[:, None] * b[src]
+    radius = rep(np.minimum(np.sqrt(area / np.pi), 0.5 * h))
+    return (radius * r * np.cos(ang))[:, None] * rep(t) + (radius * r * np.sin(ang))[:, None] * rep(b)
 
 
 # ------------------------------------------------------------------- registration
