@@ -1,12 +1,10 @@
-"""Small helpers shared by every stage: atomic file output, timing."""
+"""Small helpers shared by every stage: atomic file output."""
 
 from __future__ import annotations
 
 import os
 import tempfile
-import time
 from collections.abc import Callable
-from contextlib import contextmanager
 from pathlib import Path
 from typing import BinaryIO
 
@@ -64,13 +62,3 @@ def refuse_overwriting_input(output: str | os.PathLike, *inputs: str | os.PathLi
                 f"output '{output}' is the input file; aniso3d never overwrites its input. "
                 "Choose another output name"
             )
-
-
-@contextmanager
-def stopwatch(record: dict, key: str):
-    """Add the seconds spent in the block to ``record[key]``."""
-    t0 = time.perf_counter()
-    try:
-        yield
-    finally:
-        record[key] = record.get(key, 0.0) + time.perf_counter() - t0

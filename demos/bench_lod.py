@@ -1,7 +1,7 @@
 """Level of detail in the renderers: points drawn, frame time and error, LOD vs single level.
 
 The default tree (``aniso3d.scenes.tree()``) -> ``build_texture(mesh, 128, 64)``
--> its exact pyramid (:mod:`aniso3d.render.lod`), drawn at 1024x1024 from
+-> its exact pyramid (:mod:`aniso3d.build.pyramid`), drawn at 1024x1024 from
 ``Camera.fit(bounds, distance_scale=s)`` for s from next to the crown (0.25,
 the eye just outside the tree's bounding box) to far away (32), four ways
 with splats (single level / LOD, one point per entry / adaptive counts) and
@@ -42,12 +42,13 @@ from pathlib import Path
 import numpy as np
 
 import aniso3d
+from aniso3d.build.pyramid import pyramid
 from aniso3d.metrics import psnr, ssim
-from aniso3d.render import lod
 from aniso3d.render.camera import Camera
 from aniso3d.render.frame import FrameView
 from aniso3d.render.images import save_png
 from aniso3d.render.renderer import Renderer
+from aniso3d.render.select import select_voxels, selection_points
 from aniso3d.render.splat import _FLOATS, ATTRIB_PER_ROW
 
 BEGIN, END = "<!-- bench_lod:begin -->", "<!-- bench_lod:end -->"
@@ -84,8 +85,8 @@ def gather_upload(ctx, pyr, cam, size, near, far, state: dict) -> tuple[float, i
     does and write them into a reused (orphaned) vertex buffer and attribute
     texture. Returns (seconds, points)."""
     t = time.perf_counter()
-    sel = lod.select_voxels(pyr, cam, size, 1.0, near=near, far=far)
-    pc = lod.selection_points(pyr, sel)
+    sel = select_voxels(pyr, cam, size, 1.0, near=near, far=far)
+    pc = selection_points(pyr, sel)
     n = len(pc)
     data = np.empty((n, _FLOATS), np.float32)
     data[:, 0:3] = pc.positions - state["origin"]
@@ -140,7 +141,7 @@ def main() -> None:
     tex = aniso3d.build_texture(mesh, args.resolution, args.directions)
     build_s = time.perf_counter() - t0
     t0 = time.perf_counter()
-    pyr = lod.pyramid(tex)
+    pyr = pyramid(tex)
     pyr_s = time.perf_counter() - t0
     print(f"tree: {mesh.n_faces:,} triangles -> {args.resolution}^3, K={args.directions}: "
           f"{tex.n_voxels:,} voxels in {build_s:.1f} s; pyramid of {len(pyr)} levels "

@@ -36,7 +36,7 @@
 // is always drawn: a splat never vanishes, however small or oblique) and
 // clamped to the viewport (with AA, see below: grown by the pixel filter's
 // reach instead, no centre pixel forced). Tangent frame, shared with
-// render_splat.tangent_frame and texture._tangent_basis: t = normalize(n x h),
+// aniso3d.grid.tangent_frame (used by splats and by to_points): t = normalize(n x h),
 // b = n x t, h = x if |n.x| < 0.9 else y.
 //
 // AA (quality "high", coverage-aware; see splat.frag): also the splat's

@@ -8,18 +8,11 @@ import pytest
 from aniso3d import scenes
 from aniso3d.build.clip import make_grid
 from aniso3d.build.mesh import Mesh
+from aniso3d.build.pyramid import Pyramid, adaptive_points, as_pyramid, pyramid
 from aniso3d.build.texture import AnisoTexture, build_texture
 from aniso3d.errors import InputError
 from aniso3d.render.camera import Camera
-from aniso3d.render.lod import (
-    Pyramid,
-    adaptive_points,
-    as_pyramid,
-    pyramid,
-    select_points,
-    select_voxels,
-    selection_ranges,
-)
+from aniso3d.render.select import select_points, select_voxels, selection_ranges
 
 K = 32
 
@@ -36,7 +29,7 @@ def tree_tex(tree_mesh):
 
 @pytest.fixture(scope="module")
 def tree_pyr(tree_tex):
-    return tree_tex.pyramid()
+    return pyramid(tree_tex)
 
 
 def _box_mesh() -> Mesh:

@@ -19,9 +19,10 @@ from test_viewer import Session, drawn, mean_diff, xserver  # noqa: F401
 
 import aniso3d
 from aniso3d import InputError
+from aniso3d.build.pyramid import LodPoints, pyramid
 from aniso3d.metrics import psnr, ssim
 from aniso3d.render.camera import Camera, turntable
-from aniso3d.render.lod import LodPoints, describe_stats, pyramid
+from aniso3d.render.select import describe_stats
 
 SIZE = (128, 128)
 

@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 import numpy as np
+import plyfile
 import pytest
 
 from aniso3d import FormatError, InputError, Mesh, PointCloud, build_texture, scenes
+from aniso3d.build.bounds import bounds_of
 from aniso3d.build.mesh import concatenate
+from aniso3d.build.ply import read_ply_header
+from aniso3d.build.texture import entry_points
 
 UNIT_BOX = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
 
@@ -178,8 +182,10 @@ def test_trimesh_opens_our_ply(tree_texture, tmp_path):
     assert isinstance(loaded, trimesh.PointCloud)
     assert len(loaded.vertices) == len(pc)
     np.testing.assert_allclose(loaded.vertices, pc.positions, rtol=1e-6, atol=1e-6)
-    raw = loaded.metadata["_ply_raw"]["vertex"]["data"]
+    # and plyfile, another reader, sees every property we wrote
+    raw = plyfile.PlyData.read(str(tmp_path / "pts.ply"))["vertex"].data
     assert {"nx", "ny", "nz", "area", "ks", "shininess", "red"} <= set(raw.dtype.names)
+    np.testing.assert_array_equal(raw["area"], pc.areas.astype(np.float32))
 
 
 def test_ply_without_normals_is_a_clear_input_error(tmp_path):
@@ -225,3 +231,121 @@ def test_ply_save_refuses_missing_folder(tree_texture, tmp_path):
     _, tex = tree_texture
     with pytest.raises(InputError, match="does not exist"):
         tex.to_points().save_ply(tmp_path / "missing" / "x.ply")
+
+
+def test_ply_header_is_read_once_for_every_reader(tree_texture, tmp_path):
+    _, tex = tree_texture
+    pc = tex.to_points()
+    pc.save_ply(tmp_path / "pts.ply")
+    head = read_ply_header(tmp_path / "pts.ply")
+    assert head.format == "binary_little_endian"
+    assert head.elements == {"vertex": len(pc)} and head.is_point_cloud
+    assert head.properties["vertex"] == ("x", "y", "z", "nx", "ny", "nz", "red", "green", "blue",
+                                         "area", "ks", "shininess")  # fmt: skip
+    mesh = scenes.sphere(1.0, subdivisions=1)
+    mesh.to_trimesh().export(tmp_path / "mesh.ply")
+    head = read_ply_header(tmp_path / "mesh.ply")
+    assert head.count("face") == mesh.n_faces and not head.is_point_cloud
+    assert head.count("edge") == 0
+
+
+@pytest.mark.parametrize(
+    "content, match",
+    [
+        (b"solid x\n", "does not start with 'ply'"),
+        (b"ply\nformat ascii 1.0\nelement vertex many\nend_header\n", "damaged PLY header line"),
+        (b"ply\nformat ascii 1.0\nproperty float x\nend_header\n", "damaged PLY header line"),
+        (b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n", "no 'end_header'"),
+    ],
+)
+def test_damaged_ply_headers_are_refused(tmp_path, content, match):
+    path = tmp_path / "bad.ply"
+    path.write_bytes(content)
+    with pytest.raises(FormatError, match=match):
+        read_ply_header(path)
+    with pytest.raises(FormatError, match=match):
+        PointCloud.load_ply(path)
+
+
+@pytest.mark.parametrize("text", [True, False])
+def test_foreign_ascii_and_big_endian_ply_with_colours(tmp_path, text):
+    # Written by plyfile, not by us: ASCII, or binary in the other byte order,
+    # with float colours in [0, 1] and doubles for positions.
+    n = 20
+    rng = np.random.default_rng(2)
+    rec = np.empty(n, dtype=[("x", "f8"), ("y", "f8"), ("z", "f8"), ("nx", "f4"), ("ny", "f4"), ("nz", "f4"),
+                             ("red", "f4"), ("green", "f4"), ("blue", "f4"), ("area", "f4")])  # fmt: skip
+    pos = rng.uniform(-1, 1, (n, 3))
+    rgb = rng.uniform(0, 1, (n, 3)).astype(np.float32)
+    for i, c in enumerate("xyz"):
+        rec[c] = pos[:, i]
+        rec["n" + c] = [0.0, 1.0, 0.0][i]
+    rec["red"], rec["green"], rec["blue"] = rgb.T
+    rec["area"] = 0.5
+    el = plyfile.PlyElement.describe(rec, "vertex")
+    plyfile.PlyData([el], text=text, byte_order=">").write(str(tmp_path / "f.ply"))
+    pc = PointCloud.load_ply(tmp_path / "f.ply")
+    np.testing.assert_array_equal(pc.positions, pos)  # doubles kept exactly
+    np.testing.assert_array_equal(pc.kd, rgb)  # float colours are not divided by 255
+    np.testing.assert_array_equal(pc.normals, np.tile([0, 1, 0], (n, 1)))
+    np.testing.assert_array_equal(pc.areas, 0.5)
+
+
+def test_truncated_binary_point_cloud_is_a_format_error(tree_texture, tmp_path):
+    _, tex = tree_texture
+    path = tex.to_points().save_ply(tmp_path / "pts.ply")
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    with pytest.raises(FormatError, match="could not read PLY"):
+        PointCloud.load_ply(path)
+
+
+# ------------------------------------------------------- entries -> points
+
+
+def test_entry_points_of_some_voxels_are_those_of_to_points(tree_texture):
+    _, tex = tree_texture
+    voxels = np.array([5, 0, tex.n_voxels - 1, 17])  # any order: kept
+    ent = np.concatenate([np.arange(tex.entry_offsets[v], tex.entry_offsets[v + 1]) for v in voxels])
+    for placement, per_entry in (("centroid", 1), ("center", 1), ("sphere", 4), ("centroid", 3)):
+        full = tex.to_points(placement, per_entry)
+        rows = (ent[:, None] * per_entry + np.arange(per_entry)).reshape(-1)
+        part = PointCloud(*entry_points(tex, voxels, placement, per_entry))
+        for name in ("positions", "normals", "areas", "kd", "ks", "shininess"):
+            assert np.array_equal(getattr(part, name), getattr(full, name)[rows]), (placement, per_entry, name)
+
+
+def test_entry_points_with_counts_per_entry(tree_texture):
+    _, tex = tree_texture
+    counts = (np.arange(tex.n_entries) % 4 + 1).astype(np.int32)
+    pos, nrm, area, kd, _, _ = entry_points(tex, per_entry=counts)
+    assert len(pos) == counts.sum()
+    # each entry's area is split evenly among its points, its material repeated
+    np.testing.assert_allclose(np.repeat(tex.entry_area * tex.voxel_size**2 / counts, counts), area, rtol=1e-15)
+    np.testing.assert_array_equal(np.repeat(tex.entry_kd, counts, axis=0), kd)
+    # the points of an entry lie in its tangent plane through its centroid, within h/2
+    src = np.repeat(np.arange(tex.n_entries), counts)
+    offset = pos - tex.entry_centroid[src]
+    assert np.abs(np.sum(offset * nrm, axis=1)).max() < 1e-12 * tex.voxel_size + 1e-15
+    assert np.linalg.norm(offset, axis=1).max() <= 0.5 * tex.voxel_size * (1 + 1e-12)
+    # one count for all is the same as that count everywhere
+    same = entry_points(tex, per_entry=np.full(tex.n_entries, 3))
+    for a, b in zip(same, entry_points(tex, per_entry=3), strict=True):
+        assert np.array_equal(a, b)
+    for bad in (counts[:-1], np.zeros(tex.n_entries, int), np.full(tex.n_entries, 1.5)):
+        with pytest.raises(InputError, match="per-entry point counts"):
+            entry_points(tex, per_entry=bad)
+
+
+# ------------------------------------------------------------------- bounds
+
+
+def test_bounds_of_a_point_cloud_include_the_splats():
+    pc = PointCloud([[0, 0, 0], [1, 2, 3]], [[0, 0, 1]] * 2, [np.pi, 4 * np.pi], (0.5,) * 3, 0.1, 1.0)
+    # radii sqrt(area / pi) = 1 and 2
+    np.testing.assert_allclose(bounds_of(pc), [[-1, -1, -1], [3, 4, 5]], rtol=0, atol=1e-15)
+    empty = PointCloud(np.zeros((0, 3)), np.zeros((0, 3)), [], (0.5,) * 3, 0.1, 1.0)
+    with pytest.raises(InputError, match="point cloud is empty"):
+        bounds_of(empty)
+    with pytest.raises(InputError, match="cannot draw a str"):
+        bounds_of("tree.obj")

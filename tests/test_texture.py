@@ -21,7 +21,9 @@ from aniso3d import (
     scenes,
     sphere_directions,
 )
+from aniso3d.build.bounds import bounds_of
 from aniso3d.build.clip import clip_to_grid, make_grid, triangle_normals
+from aniso3d.build.texture_file import ARRAYS, read_texture_file, write_texture_file
 
 UNIT_BOX = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
 
@@ -709,3 +711,48 @@ def test_tiny_triangles_far_from_the_origin_keep_their_area():
     assert tex.voxel_size == pytest.approx(h)
     assert tex.total_area() == pytest.approx(mesh.area(), rel=1e-12)
     assert_density_conserved(tex, mesh, rel=1e-12)
+
+
+def test_texture_file_holds_arrays_not_objects(saved, tmp_path):
+    # The container module reads and writes named arrays; the texture
+    # checks what they mean. A file of arrays that do not make a texture
+    # (coords of the wrong shape) reads as a file but loads as damaged.
+    tex, path = saved
+    f = read_texture_file(path)
+    assert set(f.arrays) == set(ARRAYS) and f.voxel_size == tex.voxel_size and f.meta == tex.meta
+    arrays = dict(f.arrays, coords=f.arrays["coords"][:-1])
+    bad = write_texture_file(tmp_path / "bad.a3d", arrays, f.voxel_size, {"note": "x", "skip": object()})
+    g = read_texture_file(bad)
+    assert g.meta == {"note": "x"}  # only JSON values are kept
+    assert np.array_equal(g.arrays["coords"], tex.coords[:-1])
+    with pytest.raises(FormatError, match="bad.a3d' is damaged: texture field 'density' has shape"):
+        AnisoTexture.load(bad)
+
+
+# ----------------------------------------------------------------- memory, bounds
+
+
+def test_available_memory_is_what_the_system_reports():
+    import psutil
+
+    from aniso3d.build.texture import _available_memory
+
+    got = _available_memory()
+    assert isinstance(got, int) and 0 < got <= psutil.virtual_memory().total
+    if os.path.exists("/proc/meminfo"):  # Linux: the kernel's own estimate, read independently
+        with open("/proc/meminfo") as fh:
+            kib = {line.split(":")[0]: int(line.split()[1]) for line in fh}
+        # the two reads are moments apart on a shared machine: within 10 %
+        assert got == pytest.approx(kib["MemAvailable"] * 1024, rel=0.1)
+
+
+def test_bounds_of_a_texture_are_its_occupied_voxels():
+    # a quad in the plane z = 0.37 of the unit box at 5^3: occupied voxels
+    # span x, y cells 0..4 (the quad covers 0.05..0.95) and z cell 1
+    q = scenes.quad(size=0.9, center=(0.5, 0.5, 0.37))
+    tex = build_texture(q, 5, 8, bounds=UNIT_BOX)
+    np.testing.assert_allclose(bounds_of(tex), [[0, 0, 0.2], [1, 1, 0.4]], rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(bounds_of(q), q.bounds)
+    empty = build_texture(Mesh.from_arrays([[0, 0, 0], [1, 1, 1], [2, 2, 2]], [[0, 1, 2]]), 4, 8)
+    with pytest.raises(InputError, match="texture is empty"):
+        bounds_of(empty)

@@ -8,10 +8,7 @@ import sys
 import time
 from pathlib import Path
 
-from aniso3d.errors import InputError
-
 TEXTURE_SUFFIX = ".a3d"
-
 
 
 def positive_int(text: str) -> int:
@@ -103,19 +100,9 @@ def load_input(path: str | None, scene_options: dict | None = None):
 def ply_is_point_cloud(path: str) -> bool:
     """True if a PLY file declares no faces (or zero of them)."""
     from aniso3d.build.mesh import check_readable_file
+    from aniso3d.build.ply import read_ply_header
 
-    p = check_readable_file(path, "input")
-    with open(p, "rb") as fh:
-        head = fh.read(4096)
-    if not head.startswith(b"ply"):
-        raise InputError(f"'{path}' does not start with 'ply': it is not a PLY file")
-    for line in head.split(b"\n"):
-        parts = line.split()
-        if len(parts) == 3 and parts[0] == b"element" and parts[1] == b"face":
-            return parts[2] == b"0"
-        if line.strip() == b"end_header":
-            break
-    return True
+    return read_ply_header(check_readable_file(path, "input")).is_point_cloud
 
 
 def format_bytes(n: float) -> str:

@@ -15,12 +15,13 @@ from pathlib import Path
 import numpy as np
 
 from aniso3d.app.common import Progress, image_size, load_input, positive_float, positive_int
+from aniso3d.build.bounds import bounds_of
 from aniso3d.build.mesh import Mesh
 from aniso3d.build.points import PointCloud
 from aniso3d.build.texture import DEFAULT_DIRECTIONS, DEFAULT_RESOLUTION, AnisoTexture
 from aniso3d.errors import InputError
 from aniso3d.render.camera import Camera, turntable
-from aniso3d.render.lod import describe_stats
+from aniso3d.render.select import describe_stats
 
 PANEL_METHODS = ("mesh", "volume", "splat")
 
@@ -77,18 +78,6 @@ def _vec3(text: str) -> tuple[float, float, float]:
     if len(v) != 3 or not np.isfinite(v).all():
         raise argparse.ArgumentTypeError(f"expected three finite numbers X,Y,Z, got '{text}'")
     return v  # type: ignore[return-value]
-
-
-def thing_bounds(thing) -> np.ndarray:
-    if isinstance(thing, (Mesh, PointCloud)):
-        return thing.bounds
-    if isinstance(thing, AnisoTexture):
-        if thing.n_voxels == 0:
-            raise InputError("the texture is empty (no occupied voxels): nothing to render")
-        c = thing.coords
-        return np.stack([thing.origin + c.min(0) * thing.voxel_size,
-                         thing.origin + (c.max(0) + 1) * thing.voxel_size])  # fmt: skip
-    raise InputError(f"cannot frame a {type(thing).__name__}")
 
 
 def frame_points(thing, limit: int = 50_000) -> np.ndarray | None:
@@ -152,7 +141,7 @@ def cmd_render(args) -> int:
         raise InputError(f"output '{out}' must end in .png")
     refuse_overwriting_input(out, args.input)
     thing = load_input(args.input)
-    bounds = thing_bounds(thing)
+    bounds = bounds_of(thing)
     camera = camera_from_args(args, bounds, frame_points(thing))
     with Renderer(args.size, backend=args.backend) as r:
         if args.method == "all":
@@ -226,7 +215,7 @@ def cmd_frames(args) -> int:
     if folder.exists() and not folder.is_dir():
         raise InputError(f"'{folder}' exists and is not a folder; 'frames' writes numbered PNGs into a folder")
     thing = load_input(args.input)
-    camera = camera_from_args(args, thing_bounds(thing), frame_points(thing))
+    camera = camera_from_args(args, bounds_of(thing), frame_points(thing))
     method = args.method or default_method(thing)
     cams = turntable(camera, args.frames, args.degrees)
     progress = Progress("frames", enabled=None if not args.quiet else False)

@@ -47,12 +47,14 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
+from aniso3d.build.bounds import bounds_of
 from aniso3d.build.mesh import Mesh
 from aniso3d.build.points import PointCloud
+from aniso3d.build.pyramid import LodPoints, Pyramid, pyramid
 from aniso3d.build.texture import DEFAULT_DIRECTIONS, PLACEMENTS, AnisoTexture, build_texture
 from aniso3d.errors import InputError, ResourceError
 from aniso3d.render.camera import Camera
-from aniso3d.render.lod import LodPoints, Pyramid, describe_stats, pyramid
+from aniso3d.render.select import describe_stats
 
 METHODS = ("mesh", "volume", "splat")
 METHOD_LABELS = {"mesh": "polygons", "volume": "volume", "splat": "splats"}
@@ -109,23 +111,6 @@ def step_resolution(current: int, step: int) -> int:
 def cycle(options: tuple, current):
     return (
         options[(options.index(current) + 1) % len(options)] if current in options else options[0]
-    )
-
-
-def scene_bounds(thing) -> np.ndarray:
-    """(2, 3) world box of what is drawn: a texture's occupied voxels, not its
-    whole grid."""
-    if isinstance(thing, AnisoTexture):
-        if thing.n_voxels == 0:
-            raise InputError("the texture is empty (no occupied voxels): nothing to show")
-        c, h = np.asarray(thing.coords), float(thing.voxel_size)
-        return np.stack([thing.origin + c.min(0) * h, thing.origin + (c.max(0) + 1) * h])
-    if isinstance(thing, (Mesh, PointCloud)):
-        if isinstance(thing, PointCloud) and len(thing) == 0:
-            raise InputError("the point cloud is empty: nothing to show")
-        return np.asarray(thing.bounds, dtype=np.float64)
-    raise InputError(
-        f"cannot view a {type(thing).__name__}; give a mesh, a .a3d texture or a PLY point cloud"
     )
 
 
@@ -284,7 +269,7 @@ class Settings:
     directions: int = DEFAULT_DIRECTIONS
     turntable: bool = False
     overlay: bool = True
-    lod: bool = False  # splats and volume from the texture's pyramid (aniso3d.render.lod)
+    lod: bool = False  # splats and volume from the texture's pyramid (aniso3d.build.pyramid)
 
 
 def _takes(impl, name: str) -> bool:
@@ -511,7 +496,7 @@ class Viewer:
                 f"screenshot folder '{self.screenshot_dir}' does not exist; create it first"
             )
         self.out = out or sys.stdout
-        self.bounds = scene_bounds(thing)
+        self.bounds = bounds_of(thing)
 
         from aniso3d.render.context import GLContext
         from aniso3d.render.renderer import Renderer

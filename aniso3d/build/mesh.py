@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from aniso3d.build.ply import read_ply_header
 from aniso3d.errors import InputError
 
 #: Diffuse reflectance of faces whose file carries no colour (a light grey).
@@ -243,9 +244,9 @@ def load_mesh(path: str | os.PathLike, name: str | None = None) -> Mesh:
     if suffix == ".ply":
         # trimesh reads a truncated ASCII PLY without a word: compare with the
         # face count its header declares (polygons only ever add triangles).
-        declared = _ply_declared_faces(p)
+        declared = read_ply_header(p).count("face")
         loaded = sum(len(g.faces) for g in dumped if isinstance(g, trimesh.Trimesh))
-        if declared is not None and loaded < declared:
+        if loaded < declared:
             raise InputError(
                 f"mesh file '{p}' declares {declared} faces but holds only {loaded}: "
                 "the file is truncated or damaged"
@@ -280,20 +281,6 @@ def _scene_geometry(scene) -> list[tuple[object, np.ndarray | None]]:
         t = np.asarray(transform, dtype=np.float64)
         out.append((geom, None if np.array_equal(t, np.eye(4)) else t))
     return out
-
-
-def _ply_declared_faces(p: Path) -> int | None:
-    """The face count a PLY header declares, or None if it declares none."""
-    with open(p, "rb") as fh:
-        head = fh.read(65536)
-    for line in head.split(b"end_header", 1)[0].splitlines():
-        parts = line.split()
-        if len(parts) == 3 and parts[0] == b"element" and parts[1] == b"face":
-            try:
-                return int(parts[2])
-            except ValueError:
-                return None
-    return None
 
 
 def _check_binary_stl_size(p: Path) -> None:

@@ -14,9 +14,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import plyfile
 
-from aniso3d.errors import FormatError, InputError
 from aniso3d.build.mesh import DEFAULT_KD, DEFAULT_KS, DEFAULT_SHININESS, MAX_SHININESS, check_readable_file
+from aniso3d.build.ply import read_ply_header
+from aniso3d.errors import FormatError, InputError
 from aniso3d.files import atomic_write
 
 
@@ -140,22 +142,10 @@ class PointCloud:
         distance estimated from the bounding box and count).
         """
         p = check_readable_file(path, "point cloud")
-        try:
-            import trimesh
-
-            loaded = trimesh.load(str(p), file_type="ply", process=False)
-        except Exception as exc:
-            raise FormatError(f"could not read PLY '{p}': {type(exc).__name__}: {exc}") from None
-        meta = getattr(loaded, "metadata", {}) or {}
-        ply_raw = meta.get("_ply_raw", {})
-        vertex = ply_raw.get("vertex", {}).get("data") if isinstance(ply_raw, dict) else None
-        if vertex is None or not hasattr(vertex, "dtype") or vertex.dtype.names is None:
+        # The header says what the file holds before its body is read.
+        names = read_ply_header(p).properties.get("vertex")
+        if names is None:
             raise FormatError(f"'{p}' has no PLY vertex element; is it a PLY point cloud?")
-        names = vertex.dtype.names
-
-        def col(name):
-            return np.asarray(vertex[name], dtype=np.float64).reshape(-1)
-
         if not all(c in names for c in ("x", "y", "z")):
             raise FormatError(f"'{p}' vertices have no x, y, z properties")
         if not all(c in names for c in ("nx", "ny", "nz")):
@@ -163,6 +153,14 @@ class PointCloud:
                 f"'{p}' has no normals (nx, ny, nz): splats need an orientation. "
                 "Estimate normals first (e.g. Open3D estimate_normals or MeshLab)"
             )
+        try:
+            vertex = plyfile.PlyData.read(str(p), mmap=False)["vertex"].data
+        except Exception as exc:  # plyfile raises several types for damaged files
+            raise FormatError(f"could not read PLY '{p}': {type(exc).__name__}: {exc}") from None
+
+        def col(name):
+            return np.asarray(vertex[name], dtype=np.float64).reshape(-1)
+
         pos = np.stack([col("x"), col("y"), col("z")], axis=1)
         nrm = np.stack([col("nx"), col("ny"), col("nz")], axis=1)
         n = len(pos)

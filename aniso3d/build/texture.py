@@ -15,26 +15,27 @@ Besides what the paper keeps, each entry stores the area-weighted centroid of
 its facets and their area-weighted mean normal (a vector whose length, 1 for
 a flat patch and less for scattered facets, says how coherent they are). Both
 are linear sums, so a coarser texture can still be aggregated exactly from a
-finer one; the point stage uses them to put points on the true surface.
+finer one (:mod:`aniso3d.build.pyramid`); :func:`entry_points` uses them to
+put points on the true surface. The ``.a3d`` file is
+:mod:`aniso3d.build.texture_file`'s business.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
 import os
 import time
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import psutil
 
 from aniso3d.build.clip import Grid, clip_to_grid, make_grid, triangle_normals
-from aniso3d.errors import FormatError, InputError
-from aniso3d.build.mesh import Mesh, check_readable_file
+from aniso3d.build.mesh import Mesh
 from aniso3d.build.points import PointCloud
-from aniso3d.files import atomic_write
+from aniso3d.build.texture_file import ARRAYS, read_texture_file, write_texture_file
+from aniso3d.errors import FormatError, InputError
+from aniso3d.grid import cell_coords, cell_keys, ranges, tangent_frame, weighted_means
 
 #: Defaults chosen by measurement (docs/bench/report.md): K = 16 is as
 #: accurate as 64 or 256 for the volume and splat renderers (both read the
@@ -42,8 +43,6 @@ from aniso3d.files import atomic_write
 DEFAULT_RESOLUTION = 128
 DEFAULT_DIRECTIONS = 16
 
-FORMAT_NAME = "aniso3d-texture"
-FORMAT_VERSION = 1
 DIRECTION_SETS = ("fibonacci", "random")
 PLACEMENTS = ("centroid", "center", "sphere")
 POINT_NORMALS = ("mean", "sample")
@@ -205,185 +204,149 @@ class AnisoTexture:
         p = int(np.argmax(np.abs(self.directions @ w)))
         return self.density[:, p] / np.abs(w).sum()
 
-    def pyramid(self, max_levels: int | None = None):
-        """All coarser levels by exact aggregation: see :func:`aniso3d.render.lod.pyramid`."""
-        from aniso3d.render.lod import pyramid
-
-        return pyramid(self, max_levels)
-
     # ---------------------------------------------------------------- points
 
     def to_points(
         self,
         placement: str = "centroid",
-        per_entry: int = 1,
+        per_entry: int | np.ndarray = 1,
         normal: str = "mean",
     ) -> PointCloud:
         """Oriented points from the shading entries (paper section 3.1).
 
-        Every entry becomes ``per_entry`` points whose areas sum to the entry's
-        facet area. ``placement`` puts them at the facets' area-weighted
-        ``centroid`` (on the true surface), the voxel ``center``, or on the
-        voxel's virtual ``sphere`` (radius h/2) in the entry's sample direction.
-        ``normal`` is the facets' area-weighted ``mean`` normal or the entry's
-        ``sample`` direction N_p (the paper's reading).
+        Every entry becomes ``per_entry`` points (one count for all, or an (E,)
+        array of counts per entry) whose areas sum to the entry's facet area.
+        ``placement`` puts them at the facets' area-weighted ``centroid`` (on
+        the true surface), the voxel ``center``, or on the voxel's virtual
+        ``sphere`` (radius h/2) in the entry's sample direction. ``normal`` is
+        the facets' area-weighted ``mean`` normal or the entry's ``sample``
+        direction N_p (the paper's reading). See :func:`entry_points`.
         """
-        if placement not in PLACEMENTS:
-            raise InputError(f"unknown placement '{placement}'; choose one of {', '.join(PLACEMENTS)}")
-        if normal not in POINT_NORMALS:
-            raise InputError(f"unknown point normal '{normal}'; choose one of {', '.join(POINT_NORMALS)}")
-        if isinstance(per_entry, bool) or int(per_entry) != per_entry or per_entry < 1:
-            raise InputError(f"points per entry must be a whole number >= 1, got {per_entry!r}")
-        per_entry = int(per_entry)
-        h = float(self.voxel_size)
-        sample_n = self.directions[self.entry_direction]
-        if normal == "mean":
-            mean = self.entry_normal.astype(np.float64)
-            length = np.linalg.norm(mean, axis=1)
-            # Facets that cancel (a two-sided sheet registered both ways) have no
-            # mean direction; the sample direction is the honest fallback.
-            nrm = np.where((length > 1e-6)[:, None], mean / np.maximum(length, 1e-300)[:, None], sample_n)
-        else:
-            nrm = sample_n
-        if placement == "centroid":
-            pos = self.entry_centroid.astype(np.float64)
-        else:
-            centre = self.grid.cell_centers(self.coords)[self.entry_voxel]
-            pos = centre if placement == "center" else centre + 0.5 * h * sample_n
-        area = self.entry_area * h * h
-        kd, ks, sh = self.entry_kd, self.entry_ks, self.entry_shininess
-        if per_entry > 1:
-            pos, nrm, area, kd, ks, sh = _spread(pos, nrm, area, kd, ks, sh, per_entry, h)
-        return PointCloud(pos, nrm, area, kd, ks, sh, name=str(self.meta.get("source", "points")))
+        arrays = entry_points(self, None, placement, per_entry, normal)
+        return PointCloud(*arrays, name=str(self.meta.get("source", "points")))
 
     # ------------------------------------------------------------------ I/O
 
-    _ARRAYS = ("origin", "shape", "coords", "directions", "density", "entry_offsets",
-               "entry_direction", "entry_area", "entry_kd", "entry_ks", "entry_shininess",
-               "entry_centroid", "entry_normal")  # fmt: skip
+    #: The arrays a texture file stores (see :mod:`aniso3d.build.texture_file`).
+    _ARRAYS = ARRAYS
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write a versioned ``.a3d`` file (a zip of .npy arrays and a JSON header
         with a SHA-256 of the arrays); loads without pickle. Written atomically."""
-        arrays = {n: np.ascontiguousarray(getattr(self, n)) for n in self._ARRAYS}
-        digest = _digest(arrays)
-        header = {
-            "format": FORMAT_NAME,
-            "version": FORMAT_VERSION,
-            "voxel_size": float(self.voxel_size),
-            "sha256": digest,
-            "meta": _jsonable(self.meta),
-        }
-
-        def write(fh) -> None:
-            # Streamed into the temporary file: no copy of the texture in
-            # memory (a 1 GiB texture used to need 2 GiB more to be saved).
-            with zipfile.ZipFile(fh, "w", compression=zipfile.ZIP_STORED) as zf:
-                zf.writestr(_member("header.json"), json.dumps(header, indent=1))
-                for n, a in arrays.items():
-                    with zf.open(_member(n + ".npy"), "w", force_zip64=a.nbytes > 2**30) as out:
-                        np.save(out, a, allow_pickle=False)
-
-        return atomic_write(path, write)
+        arrays = {n: getattr(self, n) for n in ARRAYS}
+        return write_texture_file(path, arrays, self.voxel_size, self.meta)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> AnisoTexture:
         """Read a file written by :meth:`save`; refuse foreign, damaged or newer files."""
-        p = check_readable_file(path, "texture")
+        f = read_texture_file(path)
         try:
-            zf = zipfile.ZipFile(p)
-        except (zipfile.BadZipFile, OSError):
-            raise FormatError(
-                f"'{p}' is not an aniso3d texture file (not a zip container); "
-                "make one with 'aniso3d build MESH -o out.a3d'"
-            ) from None
-        with zf:
-            try:
-                header = json.loads(zf.read("header.json"))
-            except KeyError:
-                raise FormatError(f"'{p}' is a zip file but not an aniso3d texture (no header.json)") from None
-            except (ValueError, zipfile.BadZipFile, OSError) as exc:
-                raise FormatError(f"'{p}' has a damaged header: {exc}") from None
-            if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:
-                got = header.get("format") if isinstance(header, dict) else type(header).__name__
-                raise FormatError(f"'{p}' is not an aniso3d texture file (format is {got!r})")
-            version = header.get("version")
-            if not isinstance(version, int) or version > FORMAT_VERSION or version < 1:
-                raise FormatError(
-                    f"'{p}' has texture format version {version!r}; this aniso3d reads version "
-                    f"{FORMAT_VERSION}. Upgrade aniso3d or rebuild the texture from its mesh"
-                )
-            arrays = {}
-            try:
-                for n in cls._ARRAYS:
-                    # Read each array straight from its member: no second copy
-                    # of the file's bytes in memory; the zip CRC is still checked.
-                    with zf.open(n + ".npy") as member:
-                        arrays[n] = np.lib.format.read_array(member, allow_pickle=False)
-            except KeyError as exc:
-                raise FormatError(f"'{p}' is missing array {exc}; the file is damaged") from None
-            except (ValueError, zipfile.BadZipFile, OSError, EOFError) as exc:
-                raise FormatError(f"'{p}' is damaged ({type(exc).__name__}: {exc}); rebuild it") from None
-        if _digest(arrays) != header.get("sha256"):
-            raise FormatError(f"'{p}' failed its checksum: the file is damaged; rebuild it from its mesh")
-        voxel_size = header.get("voxel_size")
-        if isinstance(voxel_size, bool) or not isinstance(voxel_size, (int, float)):
-            raise FormatError(f"'{p}' has a damaged header: voxel_size is {voxel_size!r}")
-        meta = header.get("meta", {})
-        if not isinstance(meta, dict):
-            raise FormatError(f"'{p}' has a damaged header: meta is not an object; rebuild it")
-        try:
-            return cls(voxel_size=float(voxel_size), meta=meta, **arrays)
+            return cls(voxel_size=f.voxel_size, meta=f.meta, **f.arrays)
         except FormatError as exc:
-            raise FormatError(f"'{p}' is damaged: {exc}; rebuild it from its mesh") from None
+            raise FormatError(f"'{Path(path)}' is damaged: {exc}; rebuild it from its mesh") from None
 
 
-def _member(name: str) -> zipfile.ZipInfo:
-    """A zip entry with a fixed timestamp, so equal textures give equal files."""
-    info = zipfile.ZipInfo(name, date_time=(1980, 1, 1, 0, 0, 0))
-    info.external_attr = 0o600 << 16
-    return info
+# ------------------------------------------------------------------------ points
 
 
-def _digest(arrays: dict[str, np.ndarray]) -> str:
-    h = hashlib.sha256()
-    for n in sorted(arrays):
-        a = np.ascontiguousarray(arrays[n])
-        h.update(f"{n}:{a.dtype.str}:{a.shape}".encode())
-        h.update(a.tobytes())
-    return h.hexdigest()
+def entry_points(
+    texture: AnisoTexture,
+    voxels: np.ndarray | None = None,
+    placement: str = "centroid",
+    per_entry: int | np.ndarray = 1,
+    normal: str = "mean",
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The points of a texture's shading entries, as the arrays of a
+    :class:`~aniso3d.build.points.PointCloud`: positions (P, 3) float64 world
+    units, normals (P, 3) float64 unit, areas (P,) float64 world units
+    squared, kd (P, 3), ks (P,) and shininess (P,) float32.
+
+    The one way points are made from entries: :meth:`AnisoTexture.to_points`
+    (every voxel) and the pyramid's level clouds
+    (:meth:`aniso3d.build.pyramid.Pyramid.level_cloud`) both call it, so the
+    two agree bit for bit.
+
+    Args:
+        voxels: indices into ``texture.coords`` whose entries are wanted, in
+            that order; None: every entry, in entry order.
+        placement: "centroid", "center" or "sphere" (see ``to_points``).
+        per_entry: points per entry, one whole number >= 1 for all, or an
+            (E,) array of counts for every entry of the texture (e.g.
+            :func:`aniso3d.build.pyramid.adaptive_points`). An entry of m > 1
+            points is spread over a disc of its area in its tangent plane.
+        normal: "mean" or "sample" (see ``to_points``).
+    """
+    t = texture
+    if placement not in PLACEMENTS:
+        raise InputError(f"unknown placement '{placement}'; choose one of {', '.join(PLACEMENTS)}")
+    if normal not in POINT_NORMALS:
+        raise InputError(f"unknown point normal '{normal}'; choose one of {', '.join(POINT_NORMALS)}")
+    off = np.asarray(t.entry_offsets)
+    if voxels is None:
+        ent = slice(None)
+    else:
+        voxels = np.asarray(voxels, dtype=np.int64)
+        ent = ranges(off[voxels], off[voxels + 1])
+    h = float(t.voxel_size)
+    sample_n = t.directions[t.entry_direction[ent]]
+    if normal == "mean":
+        mean = t.entry_normal[ent].astype(np.float64)
+        length = np.linalg.norm(mean, axis=1)
+        # Facets that cancel (a two-sided sheet registered both ways) have no
+        # mean direction; the sample direction is the honest fallback.
+        nrm = np.where((length > 1e-6)[:, None], mean / np.maximum(length, 1e-300)[:, None], sample_n)
+    else:
+        nrm = sample_n
+    if placement == "centroid":
+        pos = t.entry_centroid[ent].astype(np.float64)
+    else:
+        vox = t.entry_voxel if voxels is None else np.repeat(voxels, off[voxels + 1] - off[voxels])
+        centre = np.asarray(t.origin, np.float64) + (np.asarray(t.coords, np.float64)[vox] + 0.5) * h
+        pos = centre if placement == "center" else centre + 0.5 * h * sample_n
+    area = t.entry_area[ent] * h * h
+    kd, ks, sh = t.entry_kd[ent], t.entry_ks[ent], t.entry_shininess[ent]
+    if np.ndim(per_entry) == 0:
+        _check_count(per_entry)
+        counts = None if int(per_entry) == 1 else np.full(len(area), int(per_entry), dtype=np.int64)
+    else:
+        pe = np.asarray(per_entry)
+        if pe.shape != (t.n_entries,) or (len(pe) and (pe.min() < 1 or np.any(pe != np.round(pe)))):
+            raise InputError(f"per-entry point counts must be ({t.n_entries},) whole numbers >= 1")
+        counts = pe[ent].astype(np.int64)
+        if len(counts) and counts.max() == 1:
+            counts = None
+    if counts is None:
+        return pos, nrm, area, kd, ks, sh
+    # np.repeat, not a gather by index: the same values, a contiguous copy.
+    rep = lambda a: np.repeat(a, counts, axis=0)  # noqa: E731
+    m = rep(counts).astype(np.float64)
+    return rep(pos) + _spread(nrm, area, counts, h), rep(nrm), rep(area) / m, rep(kd), rep(ks), rep(sh)
 
 
-def _jsonable(meta: dict) -> dict:
-    out = {}
-    for key, value in meta.items():
-        if isinstance(value, np.generic):
-            value = value.item()
-        if isinstance(value, (str, int, float, bool)) or value is None:
-            out[str(key)] = value
-    return out
+def _check_count(value) -> None:
+    """Refuse a points-per-entry count that is not a whole number >= 1."""
+    number = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+    if not (number and np.isfinite(value) and int(value) == value and value >= 1):
+        raise InputError(f"points per entry must be a whole number >= 1, got {value!r}")
 
 
-def _tangent_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit vectors (N, 3) perpendicular to unit normals n and each other."""
-    helper = np.where((np.abs(n[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-    t = np.cross(n, helper)
-    t /= np.linalg.norm(t, axis=1, keepdims=True)
-    return t, np.cross(n, t)
+def _spread(nrm: np.ndarray, area: np.ndarray, counts: np.ndarray, h: float) -> np.ndarray:
+    """(sum(counts), 3) offsets of the points of entries split into ``counts``
+    (P,) points each from the entry's position, entry by entry.
 
-
-def _spread(pos, nrm, area, kd, ks, sh, m, h):
-    """Split each point into m points of area/m on a Vogel spiral in its tangent
-    plane, over a disc of the point's total area (kept inside the voxel)."""
-    t, b = _tangent_basis(nrm)
-    i = np.arange(m)
+    Point i of m lies on a Vogel spiral in the entry's tangent plane (unit
+    normal ``nrm`` (P, 3)) at radius ``R sqrt((i + 0.5) / m)``, R the radius of
+    a disc of the entry's ``area`` (P,) but at most h/2 (inside the voxel), so
+    the points cover the disc evenly.
+    """
+    t, b = tangent_frame(nrm)
+    rep = lambda a: np.repeat(a, counts, axis=0)  # noqa: E731
+    i = ranges(np.zeros_like(counts), counts).astype(np.float64)
+    m = rep(counts).astype(np.float64)
     r = np.sqrt((i + 0.5) / m)
     ang = i * np.pi * (3.0 - np.sqrt(5.0))
-    radius = np.minimum(np.sqrt(area / np.pi), 0.5 * h)[:, None]
-    offs = (radius * r * np.cos(ang))[:, :, None] * t[:, None] + (radius * r * np.sin(ang))[:, :, None] * b[:, None]
-    newpos = (pos[:, None] + offs).reshape(-1, 3)
-    rep = lambda a: np.repeat(a, m, axis=0)  # noqa: E731
-    return newpos, rep(nrm), rep(area / m), rep(kd), rep(ks), rep(sh)
+    radius = rep(np.minimum(np.sqrt(area / np.pi), 0.5 * h))
+    return (radius * r * np.cos(ang))[:, None] * rep(t) + (radius * r * np.sin(ang))[:, None] * rep(b)
 
 
 # ------------------------------------------------------------------- registration
@@ -420,7 +383,7 @@ def estimate_build_bytes(
     subpolys = float(np.prod(1.0 + ext[small], axis=1).sum())
     subpolys += float((0.5 * np.abs(cross).sum(axis=1) + perimeter + 1.0).sum())
     cell = np.clip(np.floor(t.mean(axis=1)), 0, grid.shape - 1).astype(np.int64)
-    keys = np.sort((cell[:, 0] * grid.shape[1] + cell[:, 1]) * grid.shape[2] + cell[:, 2])
+    keys = np.sort(cell_keys(cell, grid.shape))
     voxels = int(np.count_nonzero(np.diff(keys)) + 1) if len(keys) else 0
     return _build_bytes(mesh.n_faces, subpolys, voxels, directions)
 
@@ -523,8 +486,7 @@ def build_texture(
 
     # ---- register
     t0 = time.perf_counter()
-    sy, sz = int(grid.shape[1]), int(grid.shape[2])
-    key = (cell[:, 0] * sy + cell[:, 1]) * sz + cell[:, 2]
+    key = cell_keys(cell, grid.shape)
     order = np.argsort(key, kind="stable")
     key, face, S, centroid = key[order], face[order], S[order], centroid[order]
     # The exact counts are known now: check again before the large arrays.
@@ -554,9 +516,7 @@ def build_texture(
     e_area = np.bincount(einv, weights=S, minlength=E)
 
     def wmean(values: np.ndarray) -> np.ndarray:
-        if values.ndim == 1:
-            return np.bincount(einv, weights=S * values, minlength=E) / e_area
-        return np.stack([wmean(values[:, i]) for i in range(values.shape[1])], axis=1)
+        return weighted_means(einv, S, values, e_area)
 
     e_kd = wmean(mesh.kd[face].astype(np.float64))
     e_ks = wmean(mesh.ks[face].astype(np.float64))
@@ -566,7 +526,7 @@ def build_texture(
     e_voxel = ekeys // K
     offsets = np.zeros(M + 1, dtype=np.int64)
     offsets[1:] = np.cumsum(np.bincount(e_voxel, minlength=M))
-    coords = np.stack([vox_keys // (sy * sz), (vox_keys // sz) % sy, vox_keys % sz], axis=1)
+    coords = cell_coords(vox_keys, grid.shape)
     timings["register"] = time.perf_counter() - t0
     report(1.0, "register")
 
@@ -608,11 +568,9 @@ def _batch_bounds(starts: np.ndarray, total: int, batch: int) -> list[int]:
 
 
 def _available_memory() -> int | None:
+    """Bytes of memory available to a new allocation without swapping (None
+    if the platform cannot tell): what a build is checked against."""
     try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
+        return int(psutil.virtual_memory().available)
+    except (OSError, RuntimeError, AttributeError):
         return None
-    return None

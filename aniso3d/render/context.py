@@ -2,7 +2,7 @@
 object the renderers make, and releases them deterministically.
 
 Headless by default: EGL first (Mesa's llvmpipe works without a GPU), then
-OSMesa (through PyOpenGL and libosmesa6, for machines without EGL), then X11
+OSMesa (libosmesa6 called through ctypes, for machines without EGL), then X11
 where ``DISPLAY`` is set. Renderers never create a context; they are handed
 one.
 """

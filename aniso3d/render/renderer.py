@@ -6,7 +6,7 @@ cloud and returns an (H, W, 3) uint8 image (row 0 at the top). Conversions
 and are reused across frames.
 
 ``lod=True`` (methods "splat" and "volume", a mesh or texture) draws from the
-texture's exact pyramid (:mod:`aniso3d.render.lod`), built and uploaded once: splats
+texture's exact pyramid (:mod:`aniso3d.build.pyramid`), built and uploaded once: splats
 select per frame, per region, the coarsest level whose voxels cover at most
 ``pixel_error`` framebuffer pixels and draw only those points; the volume
 renderer marches, per frame, the one level fine enough at the object's
@@ -25,13 +25,13 @@ import numpy as np
 
 from aniso3d.build.mesh import Mesh
 from aniso3d.build.points import PointCloud
+from aniso3d.build.pyramid import LodPoints, Pyramid, pyramid
 from aniso3d.build.texture import DEFAULT_DIRECTIONS, DEFAULT_RESOLUTION, AnisoTexture, build_texture
 from aniso3d.errors import InputError
 from aniso3d.render.camera import Camera
 from aniso3d.render.context import GLContext
 from aniso3d.render.frame import FrameView
 from aniso3d.render.lighting import Lighting
-from aniso3d.render.lod import LodPoints, Pyramid, pyramid
 
 METHODS = ("mesh", "volume", "splat")
 
@@ -140,7 +140,7 @@ class Renderer:
         if not isinstance(tex, AnisoTexture):
             raise InputError(f"cannot render a {type(thing).__name__}; pass a Mesh, AnisoTexture or PointCloud")
         out = tex
-        if method == "splat" and build["per_entry"] == "adaptive":  # counts per entry (lod.py)
+        if method == "splat" and build["per_entry"] == "adaptive":  # counts per entry (build/pyramid.py)
             opts = (build["placement"], "adaptive", build["point_normal"])
             out = self.pyramid(tex).level_cloud(0, *opts)[0]
         elif method == "splat":

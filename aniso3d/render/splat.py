@@ -7,7 +7,7 @@ Each point is a small flat shape in its tangent plane, sized from its area:
 - ``ellipse``: the disc stretched by ``sqrt(aspect)`` along the point's first
   tangent axis and shrunk by as much along the second (same area). A
   :class:`~aniso3d.build.points.PointCloud` carries no anisotropy, so the axis is a
-  fixed function of the normal (:func:`tangent_frame`, the convention
+  fixed function of the normal (:func:`~aniso3d.grid.tangent_frame`, the convention
   ``texture.to_points`` spreads points with) and ``aspect`` is an option; the
   ellipse is a well-defined shape, not a view-dependent stretch.
 
@@ -88,10 +88,12 @@ import moderngl
 import numpy as np
 
 from aniso3d.build.points import PointCloud
+from aniso3d.build.pyramid import LodPoints
 from aniso3d.errors import InputError, ResourceError
+from aniso3d.grid import ranges, tangent_frame
 from aniso3d.render.context import GLContext
 from aniso3d.render.frame import FrameView
-from aniso3d.render.lod import LodPoints, _ranges, select_voxels
+from aniso3d.render.select import select_voxels
 
 SHAPES = ("square", "disc", "ellipse")
 QUALITIES = ("fast", "high", "blend")
@@ -176,18 +178,6 @@ _FLOATS = sum(k for _, k in _ATTRIBUTES)
 
 
 # --------------------------------------------------------------------- geometry
-
-
-def tangent_frame(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(t, b), each (N, 3): unit tangent axes of unit ``normals`` (N, 3),
-    ``t = normalize(n x h)`` with ``h`` = x unless ``|n_x| >= 0.9``, then y;
-    ``b = n x t``. The square's edges and the ellipse's axes (major along t).
-    Mirrors splat.vert."""
-    n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
-    helper = np.where((np.abs(n[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-    t = np.cross(n, helper)
-    t /= np.linalg.norm(t, axis=1, keepdims=True)
-    return t, np.cross(n, t)
 
 
 def default_size_factor(shape: str, aspect: float = DEFAULT_ASPECT) -> float:
@@ -327,11 +317,11 @@ class GPUPoints:
 
 @dataclass(eq=False)
 class GPULodPoints(GPUPoints):
-    """Every level of a pyramid's points (:class:`~aniso3d.render.lod.LodPoints`)
+    """Every level of a pyramid's points (:class:`~aniso3d.build.pyramid.LodPoints`)
     uploaded once, one after the other in one buffer (finest level first),
     each level's voxels in Morton order of their grid cells with every voxel's
     points contiguous. A frame draws only the voxels
-    :func:`~aniso3d.render.lod.select_voxels` chooses, through an index buffer
+    :func:`~aniso3d.render.select.select_voxels` chooses, through an index buffer
     rewritten per frame (4 bytes per point drawn), in ascending order.
 
     ``bounds`` (and so the clip range) covers every level's points, whatever a
@@ -485,7 +475,7 @@ class SplatRenderer:
         """Upload ``cloud`` once: float64 positions minus the cloud's centre,
         then float32, so far-off clouds keep their precision.
 
-        A :class:`~aniso3d.render.lod.LodPoints` uploads every level of its pyramid
+        A :class:`~aniso3d.build.pyramid.LodPoints` uploads every level of its pyramid
         (:class:`GPULodPoints`); :meth:`draw` then selects per frame."""
         if isinstance(cloud, LodPoints):
             return self._upload_lod(cloud)
@@ -563,7 +553,7 @@ class SplatRenderer:
             r = np.empty(m, dtype=np.int64)
             r[vorder] = np.arange(m)
             clouds.append(cloud)
-            parts.append(base + _ranges(off[vorder], off[vorder + 1]))
+            parts.append(base + ranges(off[vorder], off[vorder + 1]))
             rank.append(r)
             run_first.append(base + np.cumsum(counts) - counts)
             run_count.append(counts)
@@ -596,7 +586,7 @@ class SplatRenderer:
         return handle
 
     def select(self, handle: GPULodPoints, view: FrameView, pixel_error: float = 1.0) -> dict:
-        """This frame's points of a pyramid upload: :func:`~aniso3d.render.lod.select_voxels`
+        """This frame's points of a pyramid upload: :func:`~aniso3d.render.select.select_voxels`
         for the view's camera and framebuffer size (clip range ``view.near``
         to ``view.far``), their buffer indices written to the index buffer.
         Returns (and keeps as ``handle.last_stats`` and
@@ -626,7 +616,7 @@ class SplatRenderer:
             per_level.append(int(c.sum()))
         if firsts:
             f, c = np.concatenate(firsts), np.concatenate(counts)
-            idx = _ranges(f, f + c).astype(np.uint32)
+            idx = ranges(f, f + c).astype(np.uint32)
         else:
             idx = np.zeros(0, dtype=np.uint32)
         buf = handle.index_buffer

@@ -68,12 +68,14 @@ from dataclasses import dataclass, field
 import moderngl
 import numpy as np
 
+from aniso3d.build.pyramid import Pyramid
 from aniso3d.build.texture import AnisoTexture
 from aniso3d.errors import InputError, ResourceError
+from aniso3d.grid import cell_keys
 from aniso3d.render.context import GLContext
 from aniso3d.render.frame import FrameView
 from aniso3d.render.lighting import Lighting, shade_np
-from aniso3d.render.lod import Pyramid, volume_level
+from aniso3d.render.select import volume_level
 
 #: Brick edge in voxels of the two-level index.
 BRICK = 8
@@ -269,9 +271,7 @@ def trace_ray_np(
         return out
 
     # Occupied cells by key; coords are sorted, so their keys are too.
-    sy, sz = int(shape[1]), int(shape[2])
-    coords = np.asarray(texture.coords, dtype=np.int64)
-    keys = (coords[:, 0] * sy + coords[:, 1]) * sz + coords[:, 2]
+    keys = cell_keys(texture.coords, shape)
 
     cell = np.clip(np.floor(o + d * t0).astype(np.int64), 0, shape - 1)
     step = np.sign(d).astype(np.int64)
@@ -284,7 +284,7 @@ def trace_ray_np(
         tx = float(tmax.min())
         te = min(tx, t1)
         if te > t:
-            key = (cell[0] * sy + cell[1]) * sz + cell[2]
+            key = int(cell_keys(cell, shape)[0])
             i = int(np.searchsorted(keys, key))
             if i < len(keys) and keys[i] == key:
                 hits.append((i, t, te - t))
@@ -423,7 +423,7 @@ class GPUVolume:
 class GPULodVolume:
     """Every level of a texture pyramid uploaded once (``levels[l]``, a
     :class:`GPUVolume` each); a frame ray-marches the one level
-    :func:`~aniso3d.render.lod.volume_level` picks. ``bounds`` covers every level's
+    :func:`~aniso3d.render.select.volume_level` picks. ``bounds`` covers every level's
     grid, so the clip range does not depend on the level drawn.
     ``last_stats`` is the last frame's choice."""
 
@@ -440,7 +440,7 @@ class GPULodVolume:
 
 class VolumeRenderer:
     """Ray-marches an :class:`~aniso3d.build.texture.AnisoTexture` (one ray per pixel),
-    or per frame one level of a :class:`~aniso3d.render.lod.Pyramid`."""
+    or per frame one level of a :class:`~aniso3d.build.pyramid.Pyramid`."""
 
     method = "volume"
 
@@ -461,7 +461,7 @@ class VolumeRenderer:
         }
         self.prog = gl.program("volume.vert", "volume.frag", defines=defines)
         self.vao = gl.track(ctx.vertex_array(self.prog, []))
-        #: The last pyramid frame's level choice (see :func:`~aniso3d.render.lod.volume_level`).
+        #: The last pyramid frame's level choice (see :func:`~aniso3d.render.select.volume_level`).
         self.last_lod_stats: dict | None = None
 
     def upload(self, texture: AnisoTexture | Pyramid) -> GPUVolume | GPULodVolume:
@@ -534,7 +534,7 @@ class VolumeRenderer:
         read), ``normal`` "mean" | "sample" (the shading normal of an entry),
         ``opacity`` "exponential" | "linear" (how coverage adds up along the
         ray; see the module docstring). A pyramid upload
-        (:class:`GPULodVolume`) draws the level :func:`~aniso3d.render.lod.volume_level`
+        (:class:`GPULodVolume`) draws the level :func:`~aniso3d.render.select.volume_level`
         picks for ``pixel_error`` (framebuffer pixels, default 1).
         """
         if unknown:
