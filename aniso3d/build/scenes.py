@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from aniso3d.errors import InputError
 from aniso3d.build.mesh import Mesh, concatenate
+from aniso3d.errors import InputError
 
 BARK_KD = (0.36, 0.25, 0.16)
 
