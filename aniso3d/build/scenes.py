@@ -393,8 +393,19 @@ def bush(
     where = _random_directions(rng, sprays) * rng.uniform(0, 1, sprays)[:, None] ** (1 / 6)
     spray_of = rng.integers(0, sprays, leaves)
     base = centre + where[spray_of] * radii + rng.normal(scale=spray, size=(leaves, 3))
+    # The crown's outline is lumpy: its radius along unit direction d is
+    # 1 + 0.25 lump(d) of the ellipsoid's, lump a sum of smooth waves in [-1, 1].
+    # Leaves scattered past it go back inside: a crisp, irregular outline.
+    k = _random_directions(rng, 8) * rng.uniform(3.0, 6.0, 8)[:, None]
+    phase = rng.uniform(0, 2 * np.pi, 8)
+    rel = (base - centre) / radii
+    depth = np.linalg.norm(rel, axis=1, keepdims=True)
+    lump = np.sin((rel / np.maximum(depth, 1e-12)) @ k.T + phase).sum(axis=1, keepdims=True) / np.sqrt(8)
+    depth = depth / (1.0 + 0.25 * np.clip(lump, -1.0, 1.0))
+    inside = np.minimum(1.0, rng.uniform(0.93, 1.0, (leaves, 1)) / depth)
+    base = centre + (base - centre) * inside
+    depth = depth * inside
     base[:, 1] = np.maximum(base[:, 1], 0.05 * height)
-    depth = np.linalg.norm((base - centre) / radii, axis=1, keepdims=True)
     axis = _random_directions(rng, leaves)
     across = _rotate(_perpendicular(axis), axis, rng.uniform(0, 2 * np.pi, leaves))
     size = leaf_size * rng.uniform(0.85, 1.12, leaves)
@@ -412,7 +423,7 @@ def bush(
 
 def grass(
     seed: int = 1,
-    blades: int = 16_000,
+    blades: int = 12_000,
     size: float = 1.0,
     blade_height: float = 0.22,
     blade_width: float = 0.006,
@@ -536,7 +547,7 @@ def lattice(
 
 def fur(
     seed: int = 1,
-    strands: int = 14_000,
+    strands: int = 11_000,
     radius: float = 1.0,
     hair_length: float = 0.55,
     hair_width: float = 0.007,
