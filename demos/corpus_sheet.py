@@ -7,7 +7,8 @@ the mesh) as one tile of the sheet, and a row of the table: triangles, bounds,
 what the scene stresses, the mesh as binary PLY (12 bytes per float32 vertex,
 13 per triangle: a count byte and three int32 indices) against the
 anisotropic texture built at ``--resolution`` (``AnisoTexture.nbytes``: the
-in-memory arrays, K = ``--directions``), and the build time.
+in-memory arrays, K = ``--directions``), and the build time (wall clock and
+the process's CPU time, steadier on a shared machine).
 
 The sheet goes to ``--out`` and the table to stdout and, with ``--md``,
 between the markers ``<!-- corpus:begin -->`` and ``<!-- corpus:end -->`` of
@@ -91,7 +92,7 @@ def sheet(tiles: list[np.ndarray], columns: int) -> np.ndarray:
 def table(rows: list[dict], resolution: int, directions: int) -> str:
     head = (
         f"| scene | triangles | bounds (min .. max) | stresses | mesh PLY | texture at {resolution}^3, K = "
-        f"{directions} | texture / mesh | occupied voxels | grid | build s |\n"
+        f"{directions} | texture / mesh | occupied voxels | grid | build s (CPU s) |\n"
         "|---|---:|---|---|---:|---:|---:|---:|---|---:|\n"
     )
     lines = []
@@ -101,7 +102,7 @@ def table(rows: list[dict], resolution: int, directions: int) -> str:
         lines.append(
             f"| {r['name']} | {r['triangles']:,} | {b} | {STRESSES[r['name']]} | {fmt_bytes(r['ply_bytes'])} | "
             f"{fmt_bytes(r['texture_bytes'])} | {r['texture_bytes'] / r['ply_bytes']:.1f} | {r['voxels']:,} | "
-            f"{' x '.join(str(int(s)) for s in r['shape'])} | {r['build_s']:.1f} |"
+            f"{' x '.join(str(int(s)) for s in r['shape'])} | {r['build_s']:.1f} ({r['cpu_s']:.1f}) |"
         )
     return head + "\n".join(lines) + "\n"
 
@@ -121,13 +122,13 @@ def main() -> None:
     rows, tiles = [], []
     with Renderer((args.tile, args.tile)) as r:
         for name, mesh in scenes.corpus():
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             tex = aniso3d.build_texture(mesh, args.resolution, args.directions)
-            build_s = time.perf_counter() - t0
+            build_s, cpu_s = time.perf_counter() - t0, time.process_time() - c0
             rows.append({
                 "name": name, "triangles": mesh.n_faces, "bounds": mesh.bounds.tolist(),
                 "ply_bytes": ply_bytes(mesh), "texture_bytes": tex.nbytes, "voxels": tex.n_voxels,
-                "shape": tex.shape.tolist(), "build_s": build_s,
+                "shape": tex.shape.tolist(), "build_s": build_s, "cpu_s": cpu_s,
             })  # fmt: skip
             img = r.render(mesh, camera_for(mesh), "mesh", ssaa=args.ssaa)
             tiles.append(label(img, f"{name}  ({mesh.n_faces:,} triangles)", font))
@@ -139,7 +140,8 @@ def main() -> None:
     machine = f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
     block = (
         f"{BEGIN}\n"
-        f"Made by `demos/corpus_sheet.py` ({machine}; build seconds are wall-clock on a shared machine).\n\n"
+        f"Made by `demos/corpus_sheet.py` ({machine}; build seconds are wall-clock on a shared machine, "
+        "CPU seconds of the process beside them).\n\n"
         + table(rows, args.resolution, args.directions)
         + f"{END}"
     )

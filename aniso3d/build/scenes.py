@@ -1,7 +1,12 @@
-"""Built-in scenes: a procedural tree (the paper's test object) and the small
-analytic shapes the tests use. All are deterministic; the tree is seeded.
+"""Built-in scenes: a procedural tree (the paper's test object), the corpus
+of scenes the bench runs (:data:`CORPUS`: bush, grass, lattice, fur, shell,
+blob, room, mixed; docs/corpus.md) and the small analytic shapes the tests
+use. All are deterministic; the procedural ones are seeded and take their
+sizes as parameters, and every one is built with array operations (no Python
+loop per leaf, blade, strand or triangle).
 
-The world is y-up, in metres for the tree (about 10 m tall).
+The world is y-up, in metres for the tree (about 10 m tall), the bush, grass,
+room and mixed scenes.
 """
 
 from __future__ import annotations
@@ -346,18 +351,21 @@ def bush(
     spray: float = 0.07,
 ) -> Mesh:
     """A dense, small-leaved bush (box or heather): brown stems fanning out from
-    the root, and ``leaves`` single-triangle leaves at random orientations
-    crowded towards the surface of an ellipsoidal crown.
+    the root, and ``leaves`` single-triangle leaves at random orientations in
+    sprays (leaves scattered by ``spray`` metres about a centre) crowded towards the surface of a lumpy,
+    roughly ellipsoidal crown ``width`` wide and ``height`` tall.
 
     Metres, y-up, the root at the origin. A leaf is ``leaf_size`` long (about
     0.4 of a voxel of the default bush at 128^3: sub-voxel foliage, the
-    case the texture exists for) and 0.6 of that wide. Faces: the stems'
+    case the texture exists for) and 0.8 of that wide. Faces: the stems'
     cylinders first (``stems`` * 5 cylinders of 6 sides, 12 triangles each),
     then one triangle per leaf.
     """
     _check_count("bush", 0, leaves=leaves)
     _check_count("bush", 1, stems=stems)
     _check_positive("bush", width=width, height=height, leaf_size=leaf_size)
+    if not (np.isfinite(spray) and spray >= 0):
+        raise InputError(f"bush: spray is a distance in metres >= 0, got {spray!r}")
     rng = np.random.default_rng(seed)
     centre = np.array([0.0, 0.55 * height, 0.0])
     radii = np.array([0.5 * width, 0.45 * height, 0.5 * width])
@@ -436,7 +444,7 @@ def grass(
     of ``segments`` segments (2 * segments - 1 triangles, the last a pointed
     tip) rising with a random lean and bowing further towards its tip, green
     darkening towards the ground. The ground is a 24 x 24 grid (1152 triangles)
-    first, then the blades. Blade widths (about 0.4 of a voxel of the default
+    first, then the blades. Blade widths (about 0.6 of a voxel of the default
     patch at 128^3) make this the thin-feature case with a dense, view-dependent
     coverage: seen from the side, the blades close; from above, the ground
     shows.
@@ -486,7 +494,7 @@ def lattice(
     lattice, a fraction ``missing`` of the beams left out at random.
 
     World units of ``cell_size``; ``beam_width`` is a fraction of a cell (the
-    default, 0.07 of a cell, is about 0.9 of a voxel at 128^3 for 8 cells: thin
+    default, 0.07 of a cell, is about 0.8 of a voxel at 128^3 for 8 cells: thin
     features along long straight lines, where aliasing is most visible). Each
     beam is an open square tube between two node cubes, and a node cube keeps
     only the sides no beam attaches to, so the truss is one closed surface
