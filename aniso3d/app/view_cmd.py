@@ -17,6 +17,7 @@ METHOD_CHOICES = ("mesh", "volume", "splat")
 
 def register(sub) -> None:
     from aniso3d.app.viewer import CONTROLS, DEFAULT_RESOLUTION, QUALITIES, SPLATS
+    from aniso3d.build.scenes import SCENES
     from aniso3d.build.texture import DEFAULT_DIRECTIONS
 
     keys = "\n".join(f"  {k:<20}{a}" for k, a in CONTROLS)
@@ -33,7 +34,7 @@ def register(sub) -> None:
     )
     p.add_argument("input", nargs="?", default=None,
                    help="mesh file, saved texture (.a3d), PLY point cloud, or scene:NAME "
-                        "(cube, sphere, quad, tree); default: the built-in tree")  # fmt: skip
+                        f"({', '.join(SCENES)}); default: the built-in tree")  # fmt: skip
     p.add_argument("--size", type=image_size, default=(960, 640), help="window size, e.g. 1280x800")
     p.add_argument("--method", choices=METHOD_CHOICES, default=None,
                    help="renderer to start with (default: what the input is)")  # fmt: skip
