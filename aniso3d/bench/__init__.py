@@ -1,0 +1,1 @@
+"""The bench: sweeps of speed, bytes and error against the supersampled polygon truth."""

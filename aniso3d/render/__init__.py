@@ -1,0 +1,1 @@
+"""Rendering on the GPU: context, shaders, camera, lighting, the three renderers and the Renderer front."""
