@@ -147,6 +147,13 @@ class Cache:
             self._drop((sid, key))
         return values
 
+    def collect(self) -> int:
+        """Release now the entries whose sources were garbage-collected
+        (otherwise released at the next call); returns how many."""
+        n = len(self._pending)
+        self._flush()
+        return n
+
     def clear(self) -> None:
         """Drop and release every entry (and any release still pending)."""
         while self._entries:

@@ -90,9 +90,13 @@ class Frame:
         color: (H, W, 3 or 4) uint8, row 0 at the top: what ``Renderer.render``
             returns for the same arguments.
         depth: (H, W) float32, row 0 at the top: distance along the view axis
-            (world units) from the eye to the nearest surface drawn in the
-            pixel (with supersampling, the nearest over the pixel's samples);
-            ``+inf`` where nothing was drawn (the background). Never NaN.
+            (world units) from the eye to what the renderer wrote in the
+            pixel's depth buffer (with supersampling, the nearest of the
+            pixel's samples); ``+inf`` where nothing was drawn (the
+            background). Never NaN. Polygons and "fast" splats write the
+            exact surface; "high" and "blend" splats their visibility depth,
+            up to ``push`` times a splat's larger half-axis behind it; the
+            volume the depth where the opacity reaches one half.
         seconds: time to draw and read back the colour (as
             ``Renderer.last_frame_seconds``; the depth read-back is not counted).
         stats: what the renderer drew (:class:`DrawStats`).

@@ -352,7 +352,8 @@ class Renderer:
         it; depth the view-axis distance, +inf on the background)."""
         img, stats, fbo, view = self._draw(thing, camera, method, ssaa, alpha, size, build, options, values)
         fw, fh = view.size
-        window = np.frombuffer(fbo.read(attachment=-1, components=1, dtype="f4"), dtype=np.float32).reshape(fh, fw)[::-1]
+        raw = fbo.read(attachment=-1, components=1, dtype="f4")  # the depth attachment
+        window = np.frombuffer(raw, dtype=np.float32).reshape(fh, fw)[::-1]
         depth = view_depth(window, view.near, view.far)
         s = view.ssaa
         if s > 1:  # the nearest sample of each pixel
