@@ -18,7 +18,7 @@ given as dataclasses or as keywords:
 - frame options, arguments of ``render``: ``ssaa``, ``alpha``, ``size``.
 
 Conversions and GPU uploads are made once per thing and options and kept in
-two bounded :class:`~aniso3d.render.cache.Cache` s (host memory and GPU
+two bounded caches (:class:`~aniso3d.render.cache.Cache`: host memory and GPU
 memory), which hold the things weakly: a thing that is garbage-collected takes
 what was made from it along.
 
