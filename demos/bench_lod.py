@@ -49,7 +49,7 @@ from aniso3d.render.frame import FrameView
 from aniso3d.render.images import save_png
 from aniso3d.render.renderer import Renderer
 from aniso3d.render.select import select_voxels, selection_points
-from aniso3d.render.splat import _FLOATS, ATTRIB_PER_ROW
+from aniso3d.render.splat import ATTRIB_PER_ROW, FLOATS_PER_POINT
 
 BEGIN, END = "<!-- bench_lod:begin -->", "<!-- bench_lod:end -->"
 DISTANCES = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
@@ -88,7 +88,7 @@ def gather_upload(ctx, pyr, cam, size, near, far, state: dict) -> tuple[float, i
     sel = select_voxels(pyr, cam, size, 1.0, near=near, far=far)
     pc = selection_points(pyr, sel)
     n = len(pc)
-    data = np.empty((n, _FLOATS), np.float32)
+    data = np.empty((n, FLOATS_PER_POINT), np.float32)
     data[:, 0:3] = pc.positions - state["origin"]
     data[:, 3:6] = pc.normals
     data[:, 6] = np.sqrt(pc.areas)
@@ -162,16 +162,13 @@ def main() -> None:
             r.render(tex, cam0, method, **extra, **opts)
             upload_s[name] = time.perf_counter() - t
         ctx = r.gl.ctx
-        lod_handle = next(
-            h for k, (_, h) in r._uploads.items()
-            if k[1] == "splat" and ("lod", True) in k[2] and ("per_entry", 1) in k[2]
-        )  # fmt: skip
+        lod_handle = r.upload(tex, "splat", lod=True, per_entry=1)  # the cached upload
         splat_impl = r.method_renderer("splat")
         n0 = len(pyr.level_cloud(0)[0])
         n0_adaptive = len(pyr.level_cloud(0, per_entry="adaptive")[0])
         state = {
             "origin": lod_handle.origin,
-            "vbo": r.gl.track(ctx.buffer(reserve=n0 * _FLOATS * 4)),
+            "vbo": r.gl.track(ctx.buffer(reserve=n0 * FLOATS_PER_POINT * 4)),
             "tex": r.gl.track(ctx.texture((2 * ATTRIB_PER_ROW, -(-n0 // ATTRIB_PER_ROW)), 4,
                                           dtype="f4")),  # fmt: skip
         }

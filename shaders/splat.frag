@@ -46,7 +46,7 @@
 //     boundary. For the layers from DEEP on, the coverage of resolved splats
 //     (c times the regime weight) also goes to f_resolved (channel = layer -
 //     DEEP). A splat whose box is wider than u_shade_box pixels is shaded per
-//     fragment in layer 0 (in the geometry path, which render_splat.py sends
+//     fragment in layer 0 (in the geometry path, which aniso3d/render/splat sends
 //     those splats through); any other fragment takes its splat's colour
 //     shaded once at the centre (SplatData.rgb). splat_aa_resolve.frag composites the layers.
 #include "lighting.glsl"
@@ -92,30 +92,8 @@ uniform float u_slab_min;     // a typical splat's larger half-axis, world units
 #endif
 #endif
 
-in SplatData {
-    flat vec3 hu;
-    flat vec3 hv;
-    flat vec3 hw;
-    flat vec3 hc;
-    flat float num;
-    flat float kn;
-    flat vec2 centre_px;
-    flat float centre_z;
-    flat float centre_zp;
-    flat float push;
-    flat int id;
-    flat vec3 n;
-    flat vec3 kd;
-    flat vec2 spec;
-#ifdef AA
-    flat vec2 cpx;
-    flat vec3 box;
-    flat float regime;
-    flat vec2 zrange;
-    flat vec3 rgb;
-    flat vec4 clip;
-#endif
-} fs_in;
+#include "splat_data.glsl"
+in SplatData SPLAT_DATA fs_in;
 
 #if PASS == 0
 out uint f_id;

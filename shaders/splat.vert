@@ -5,7 +5,7 @@
 // In (one vertex per point, positions relative to the cloud's local origin):
 //   in_position (local frame), in_normal (unit, world orientation),
 //   in_size = sqrt(area) (world units), in_kd (RGB), in_spec = (ks, shininess).
-// Out: SplatData (all flat), and
+// Out: SplatData (splat_data.glsl; all flat), and
 //   SPRITE path (default): gl_Position at the box centre and a gl_PointSize
 //   covering the box; splats whose box is wider than u_max_sprite, or with
 //   nothing to draw, are moved outside the clip volume (culled);
@@ -72,36 +72,15 @@ uniform float u_range;       // far - near
 #endif
 #endif
 
+#include "splat_data.glsl"
+
 in vec3 in_position;
 in vec3 in_normal;
 in float in_size;
 in vec3 in_kd;
 in vec2 in_spec;
 
-out SplatData {
-    flat vec3 hu;          // rows of the homography (see above)
-    flat vec3 hv;
-    flat vec3 hw;
-    flat vec3 hc;
-    flat float num;        // distance of the eye from the splat's plane
-    flat float kn;         // K / num
-    flat vec2 centre_px;   // centre of the pixel holding the projected centre; -1e9 if none
-    flat float centre_z;   // window depth of the centre
-    flat float centre_zp;  // the same pushed back by push
-    flat float push;       // visibility-pass push-back along the view axis
-    flat int id;           // index of the point in the uploaded buffer
-    flat vec3 n;           // unit normal, world orientation
-    flat vec3 kd;
-    flat vec2 spec;        // (ks, shininess)
-#ifdef AA
-    flat vec2 cpx;         // projected centre, pixels (continuous)
-    flat vec3 box;         // sub-pixel footprint: half-sides (pixels), amplitude
-    flat float regime;     // 0: sub-pixel box formula, 1: exact shape
-    flat vec2 zrange;      // linear depths of the bounding sphere's front and back
-    flat vec3 rgb;         // shade() at the centre (PASS 2)
-    flat vec4 clip;        // the pixel box drawn (x0, y0, x1, y1)
-#endif
-} vs_out;
+out SplatData SPLAT_DATA vs_out;
 
 #ifdef GEOMETRY_PATH
 flat out vec4 vs_box;

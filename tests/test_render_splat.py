@@ -128,8 +128,8 @@ def shoelace(p: np.ndarray) -> float:
 
 def test_options_are_validated_with_the_bad_value_named():
     opts = SplatRenderer.options()
-    assert opts["splat"] == "square" and opts["quality"] == "fast"
-    assert opts["size_factor"] == default_size_factor("square")
+    assert opts.splat == "square" and opts.quality == "fast"
+    assert opts.size_factor == default_size_factor("square")
     bad = [
         ({"splat": "hexagon"}, "hexagon"),
         ({"quality": "ultra"}, "ultra"),

@@ -86,8 +86,8 @@ def projected_px(positions, normals, areas, cam: Camera, focal: float) -> np.nda
 
 
 def test_high_is_an_option_and_blend_keeps_the_old_mode():
-    assert SplatRenderer.options(quality="high")["quality"] == "high"
-    assert SplatRenderer.options(quality="blend")["quality"] == "blend"
+    assert SplatRenderer.options(quality="high").quality == "high"
+    assert SplatRenderer.options(quality="blend").quality == "blend"
 
 
 # ------------------------------------------------------------ coverage

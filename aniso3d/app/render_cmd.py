@@ -107,20 +107,41 @@ def camera_from_args(args, bounds: np.ndarray, points: np.ndarray | None = None)
     return cam
 
 
-def render_options(args) -> dict:
-    return {
-        "resolution": args.resolution,
-        "directions": args.directions,
-        "placement": args.placement,
-        "per_entry": args.points_per_entry,
-    }
+def _lod(method: str, args) -> bool:
+    """``--lod`` applies to the methods that draw from a pyramid."""
+    return bool(getattr(args, "lod", False)) and method in ("splat", "volume")
 
 
-def draw_options(method: str, args) -> dict:
-    opts = {"splat": args.splat, "quality": args.quality} if method == "splat" else {}
-    if getattr(args, "lod", False) and method in ("splat", "volume"):
-        opts.update(lod=True, pixel_error=args.pixel_error)
-    return opts
+def build_options(method: str, args):
+    """The :class:`~aniso3d.render.renderer.BuildOptions` of ``method`` from the
+    command line (how the input is converted; ``--lod``)."""
+    from aniso3d.render.renderer import BuildOptions
+
+    return BuildOptions(resolution=args.resolution, directions=args.directions, placement=args.placement,
+                        per_entry=args.points_per_entry, lod=_lod(method, args))  # fmt: skip
+
+
+def draw_options(method: str, args):
+    """The draw options of ``method``'s renderer from the command line: its
+    ``Options`` dataclass (``--splat``, ``--quality``; ``--pixel-error`` with
+    ``--lod``)."""
+    pixel_error = args.pixel_error if _lod(method, args) else None
+    if method == "splat":
+        from aniso3d.render.splat import SplatOptions
+
+        return SplatOptions(splat=args.splat, quality=args.quality, pixel_error=pixel_error)
+    if method == "volume":
+        from aniso3d.render.volume import VolumeOptions
+
+        return VolumeOptions(pixel_error=pixel_error)
+    from aniso3d.render.polygon import MeshOptions
+
+    return MeshOptions()
+
+
+def frame_options(method: str, args) -> dict:
+    """``build`` and ``options`` keywords of ``Renderer.render`` for ``method``."""
+    return {"build": build_options(method, args), "options": draw_options(method, args)}
 
 
 def default_method(thing) -> str:
@@ -150,14 +171,15 @@ def cmd_render(args) -> int:
                 print(row)
         else:
             method = args.method or default_method(thing)
-            img = r.render(thing, camera, method, ssaa=args.ssaa, **render_options(args),
-                           **draw_options(method, args))  # fmt: skip
+            opts = frame_options(method, args)
+            img = r.render(thing, camera, method, ssaa=args.ssaa, **opts)
             # A second frame measures the steady state (the first includes uploads).
-            r.render(thing, camera, method, ssaa=args.ssaa, **render_options(args), **draw_options(method, args))
+            frame = r.render_frame(thing, camera, method, ssaa=args.ssaa, **opts)
             print(f"{method}: {args.size[0]}x{args.size[1]}, ssaa {args.ssaa}, "
-                  f"frame {1000 * r.last_frame_seconds:.1f} ms on {r.gl.renderer}")  # fmt: skip
-            if r.last_lod_stats:
-                print(describe_stats(r.last_lod_stats))
+                  f"frame {1000 * frame.seconds:.1f} ms on {r.gl.renderer}, "
+                  f"{frame.stats.drawn:,} {frame.stats.unit}")  # fmt: skip
+            if frame.stats.lod:
+                print(describe_stats(frame.stats.lod))
     save_png(out, img)
     print(f"wrote {out}")
     return 0
@@ -184,13 +206,14 @@ def figure(r, thing, camera: Camera, args) -> tuple[np.ndarray, list[str]]:
              "splat": f"(c) {args.splat} splats ({args.quality})"}
     for method in methods:
         ssaa = args.ssaa
-        opts = {**render_options(args), **draw_options(method, args)}
+        opts = frame_options(method, args)
         r.render(thing, camera, method, ssaa=ssaa, **opts)  # warm-up: upload, compile
         ms = 1000 * r.time_frames(thing, camera, method, frames=3, warmup=0, ssaa=ssaa, **opts)
-        img = r.render(thing, camera, method, ssaa=ssaa, **opts)
+        frame = r.render_frame(thing, camera, method, ssaa=ssaa, **opts)
+        img = frame.color
         text = f"{names[method]}{', ' + str(ssaa) + ' spp' if method == 'mesh' and ssaa == 1 else ''}\n{ms:.0f} ms"
         row = f"{names[method]:<22} {ms:8.1f} ms"
-        lod_text = describe_stats(r.last_lod_stats)
+        lod_text = describe_stats(frame.stats.lod)
         if truth is not None:
             from aniso3d.metrics import psnr
 
@@ -221,7 +244,7 @@ def cmd_frames(args) -> int:
     progress = Progress("frames", enabled=None if not args.quiet else False)
     with Renderer(args.size, backend=args.backend) as r:
         paths = r.render_path(thing, cams, folder, method, progress=progress, ssaa=args.ssaa,
-                              **render_options(args), **draw_options(method, args))  # fmt: skip
+                              **frame_options(method, args))  # fmt: skip
     print(f"wrote {len(paths)} frames to {folder}/ ({paths[0].name} .. {paths[-1].name})")
     return 0
 

@@ -514,7 +514,7 @@ def _downfilter_cpu(size: tuple[int, int], ssaa: int, repeats: int = 3) -> float
     filter's own CPU time varies by some 20% between runs."""
     if ssaa <= 1:
         return 0.0
-    from aniso3d.render.renderer import _downsample  # the very filter render() applies
+    from aniso3d.render.renderer import downsample as _downsample  # the very filter render() applies
 
     # Filled (not lazily zero-mapped) and flipped like the read-back frame.
     raw = np.full((size[1] * ssaa, size[0] * ssaa, 4), 128, np.uint8)[::-1]

@@ -7,13 +7,25 @@ draws at ``ssaa`` times the size and box-filters); this module only draws.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import moderngl
 import numpy as np
 
 from aniso3d.build.mesh import Mesh
+from aniso3d.errors import InputError
+from aniso3d.render.base import DrawOptions, option_parser
 from aniso3d.render.context import GLContext
-from aniso3d.render.frame import FrameView
+from aniso3d.render.frame import DrawStats, FrameView
+
+
+@dataclass(frozen=True)
+class MeshOptions(DrawOptions):
+    """The polygon renderer has no draw options of its own: the ground truth
+    is the mesh as it is. Its one quality setting, supersampling, is the
+    frame's (``Renderer.render(..., ssaa=)``), as for every method."""
+
+    what: ClassVar[str] = "mesh"
 
 
 @dataclass(eq=False)
@@ -32,12 +44,18 @@ class MeshRenderer:
     """Draws a :class:`~aniso3d.build.mesh.Mesh` with flat face normals and two-sided Phong."""
 
     method = "mesh"
+    Options = MeshOptions
+    options = option_parser(MeshOptions)
 
     def __init__(self, gl: GLContext):
         self.gl = gl
         self.prog = gl.program("mesh.vert", "mesh.frag")
 
     def upload(self, mesh: Mesh) -> GPUMesh:
+        """Upload ``mesh`` once: unshared vertices, float64 minus the mesh's
+        centre, then float32, with per-face normals and materials."""
+        if not isinstance(mesh, Mesh):
+            raise InputError(f"the polygon renderer draws a Mesh, got {type(mesh).__name__}")
         bounds = mesh.bounds
         origin = 0.5 * (bounds[0] + bounds[1])
         tri = mesh.triangles - origin  # float64 subtraction, then float32
@@ -59,7 +77,11 @@ class MeshRenderer:
         )
         return GPUMesh(vao, vbo, origin, bounds, n, data.nbytes)
 
-    def draw(self, handle: GPUMesh, view: FrameView, fbo=None) -> None:
+    def draw(
+        self, handle: GPUMesh, view: FrameView, fbo=None, options: MeshOptions | None = None, **values
+    ) -> DrawStats:
+        """Draw into the bound framebuffer (``fbo``; depth tested)."""
+        MeshOptions.resolve(options, values)
         ctx = self.gl.ctx
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
@@ -73,6 +95,10 @@ class MeshRenderer:
             strict=False,
         )
         handle.vao.render(moderngl.TRIANGLES)
+        return DrawStats(drawn=int(handle.n_faces), unit="triangles")
 
     def release(self, handle: GPUMesh) -> None:
         self.gl.free(handle.vao, handle.vbo)
+
+    def release_all(self) -> None:
+        """Nothing of its own to free: the program is cached by the context."""

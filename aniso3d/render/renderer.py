@@ -1,9 +1,26 @@
-"""The batch-frame Python API: one :class:`Renderer`, three methods.
+"""The batch-frame Python API: one :class:`Renderer` for the three methods.
 
 ``Renderer.render(thing, camera, method=...)`` draws a mesh, texture or point
-cloud and returns an (H, W, 3) uint8 image (row 0 at the top). Conversions
-(mesh -> texture -> points) and GPU uploads happen once per thing and options,
-and are reused across frames.
+cloud and returns an (H, W, 3) uint8 image (row 0 at the top);
+``Renderer.render_frame`` returns a :class:`~aniso3d.render.frame.Frame` with
+the same image, its depth and what was drawn.
+
+Three kinds of options, each a frozen dataclass checked on construction,
+given as dataclasses or as keywords:
+
+- build options (:class:`BuildOptions`, ``build=``): how a thing is converted
+  (mesh -> texture -> points) and what is uploaded (``lod``: the texture's
+  pyramid, :mod:`aniso3d.build.pyramid`);
+- draw options (``options=``): the method renderer's own ``Options``
+  (:class:`~aniso3d.render.splat.SplatOptions`,
+  :class:`~aniso3d.render.volume.VolumeOptions`,
+  :class:`~aniso3d.render.polygon.MeshOptions`);
+- frame options, arguments of ``render``: ``ssaa``, ``alpha``, ``size``.
+
+Conversions and GPU uploads are made once per thing and options and kept in
+two bounded caches (:class:`~aniso3d.render.cache.Cache`: host memory and GPU
+memory), which hold the things weakly: a thing that is garbage-collected takes
+what was made from it along.
 
 ``lod=True`` (methods "splat" and "volume", a mesh or texture) draws from the
 texture's exact pyramid (:mod:`aniso3d.build.pyramid`), built and uploaded once: splats
@@ -18,7 +35,9 @@ from __future__ import annotations
 
 import os
 import time
+from dataclasses import dataclass, fields
 from pathlib import Path
+from typing import Any
 
 import moderngl
 import numpy as np
@@ -26,22 +45,93 @@ import numpy as np
 from aniso3d.build.mesh import Mesh
 from aniso3d.build.points import PointCloud
 from aniso3d.build.pyramid import LodPoints, Pyramid, pyramid
-from aniso3d.build.texture import DEFAULT_DIRECTIONS, DEFAULT_RESOLUTION, AnisoTexture, build_texture
+from aniso3d.build.texture import (
+    DEFAULT_DIRECTIONS,
+    DEFAULT_RESOLUTION,
+    PLACEMENTS,
+    POINT_NORMALS,
+    AnisoTexture,
+    build_texture,
+)
 from aniso3d.errors import InputError
+from aniso3d.render.base import DrawOptions, MethodRenderer, choice, unknown_names
+from aniso3d.render.cache import Cache
 from aniso3d.render.camera import Camera
 from aniso3d.render.context import GLContext
-from aniso3d.render.frame import FrameView
+from aniso3d.render.frame import Frame, FrameView, view_depth
 from aniso3d.render.lighting import Lighting
 
 METHODS = ("mesh", "volume", "splat")
+#: Default bounds of each of a renderer's two caches.
+CACHE_ENTRIES = 32
+CACHE_BYTES = 2 << 30
 
-#: Options that change how a thing is converted (and so key the upload cache).
-BUILD_OPTIONS = ("resolution", "directions", "placement", "per_entry", "point_normal")
-DEFAULT_BUILD = {"resolution": DEFAULT_RESOLUTION, "directions": DEFAULT_DIRECTIONS,
-                 "placement": "centroid", "per_entry": 1, "point_normal": "mean"}  # fmt: skip
+
+def _whole(value: Any, what: str) -> int:
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise InputError(f"{what} must be a whole number >= 1, got {value!r}")
+    return int(value)
+
+
+@dataclass(frozen=True)
+class BuildOptions:
+    """How :class:`Renderer` turns a thing into what a method draws, and what
+    it uploads. Keys the conversion and upload caches.
+
+    Attributes:
+        resolution: voxels along the longest axis of a mesh's texture.
+        directions: sphere sample directions K of a mesh's texture.
+        placement: where a texture's points sit (``AnisoTexture.to_points``).
+        per_entry: points per shading entry, a whole number or "adaptive".
+        point_normal: the points' normal, "mean" or "sample".
+        lod: draw from the texture's pyramid (methods "splat" and "volume").
+    """
+
+    resolution: int = DEFAULT_RESOLUTION
+    directions: int = DEFAULT_DIRECTIONS
+    placement: str = "centroid"
+    per_entry: int | str = 1
+    point_normal: str = "mean"
+    lod: bool = False
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        set_(self, "resolution", _whole(self.resolution, "build option resolution (voxels)"))
+        set_(self, "directions", _whole(self.directions, "build option directions"))
+        choice(self.placement, PLACEMENTS, "placement")
+        choice(self.point_normal, POINT_NORMALS, "point normal")
+        if self.per_entry != "adaptive":
+            set_(self, "per_entry", _whole(self.per_entry, "build option per_entry (points per entry, or 'adaptive')"))
+        if not isinstance(self.lod, (bool, np.bool_)):
+            raise InputError(f"build option lod must be True or False, got {self.lod!r}")
+        set_(self, "lod", bool(self.lod))
+
+    @classmethod
+    def names(cls) -> tuple[str, ...]:
+        return tuple(f.name for f in fields(cls))
+
+    @classmethod
+    def parse(cls, **values: Any) -> BuildOptions:
+        """Build options from keywords; None stands for the default."""
+        unknown_names(values, cls.names(), "build")
+        return cls(**{k: v for k, v in values.items() if v is not None})
+
+    @classmethod
+    def resolve(cls, build: BuildOptions | None, values: dict[str, Any]) -> BuildOptions:
+        """``build`` if given, else :meth:`parse` of ``values``; not both."""
+        if build is None:
+            return cls.parse(**values)
+        if values:
+            raise InputError(
+                f"pass build options either as BuildOptions or as keywords, not both (got {sorted(values)})"
+            )
+        if not isinstance(build, cls):
+            raise InputError(f"build options must be BuildOptions, got {type(build).__name__}")
+        return build
 
 
 def check_size(size) -> tuple[int, int]:
+    """(width, height) of an image, checked: whole pixels, 1 to 16384 a side."""
     try:
         w, h = (int(size[0]), int(size[1]))
     except (TypeError, ValueError, IndexError):
@@ -53,8 +143,9 @@ def check_size(size) -> tuple[int, int]:
     return w, h
 
 
-def _downsample(img: np.ndarray, s: int) -> np.ndarray:
-    """Box-filter an (H*s, W*s, C) float image by s."""
+def downsample(img: np.ndarray, s: int) -> np.ndarray:
+    """Box-filter an (H*s, W*s, C) float image by ``s`` per axis to (H, W, C):
+    the supersampling filter of :meth:`Renderer.render`."""
     if s == 1:
         return img
     h, w, c = img.shape
@@ -71,6 +162,8 @@ class Renderer:
         gl: a :class:`GLContext` to draw with; by default one is made (and
             released with the renderer).
         backend: OpenGL backend for the context made here ("auto", "egl", ...).
+        cache_entries, cache_bytes: bounds of each of the two caches
+            (:attr:`conversions`, :attr:`uploads`).
     """
 
     def __init__(
@@ -79,16 +172,21 @@ class Renderer:
         lighting: Lighting | None = None,
         gl: GLContext | None = None,
         backend: str = "auto",
+        cache_entries: int = CACHE_ENTRIES,
+        cache_bytes: int | None = CACHE_BYTES,
     ):
         self.size = check_size(size)
         self.lighting = lighting or Lighting()
+        #: Conversions in host memory: a mesh's texture, a texture's points and pyramid.
+        self.conversions = Cache(cache_entries, cache_bytes, "conversion cache")
+        #: GPU uploads by (thing, method, build options), released through their
+        #: method renderer when they leave. A handle from :meth:`upload` stays
+        #: valid until then (or until :meth:`release`).
+        self.uploads = Cache(cache_entries, cache_bytes, "upload cache")
         self._own_gl = gl is None
         self.gl = gl or GLContext(backend)
-        self._impl: dict[str, object] = {}
-        self._converted: dict[tuple, tuple[object, object]] = {}
-        self._uploads: dict[tuple, tuple[object, object]] = {}
+        self._impl: dict[str, MethodRenderer] = {}
         self._fbos: dict[tuple[int, int], moderngl.Framebuffer] = {}
-        self._pyramids: dict[int, tuple[AnisoTexture, Pyramid]] = {}
         self.last_frame_seconds = 0.0
         #: Selection of the last ``lod=True`` frame (None after other frames):
         #: for splats ``points`` drawn, ``points_per_level``, ``culled``
@@ -97,7 +195,7 @@ class Renderer:
 
     # ----------------------------------------------------------- plumbing
 
-    def method_renderer(self, method: str):
+    def method_renderer(self, method: str) -> MethodRenderer:
         """The per-method renderer object (made on first use)."""
         if method not in METHODS:
             raise InputError(f"unknown render method '{method}'; choose one of {', '.join(METHODS)}")
@@ -112,7 +210,7 @@ class Renderer:
             impl = self._impl[method] = cls(self.gl)
         return impl
 
-    def _convert(self, thing, method: str, build: dict):
+    def _convert(self, thing, method: str, build: BuildOptions):
         """``thing`` as what ``method`` draws: Mesh, AnisoTexture or PointCloud."""
         want = {"mesh": Mesh, "volume": AnisoTexture, "splat": PointCloud}[method]
         if isinstance(thing, want):
@@ -124,29 +222,22 @@ class Renderer:
             )
         if isinstance(thing, PointCloud):
             raise InputError("a point cloud can only be drawn with method 'splat'")
-        key = (id(thing), method, tuple(sorted(build.items())))
-        hit = self._converted.get(key)
-        if hit is not None and hit[0] is thing:
-            return hit[1]
+        if not isinstance(thing, (Mesh, AnisoTexture)):
+            raise InputError(f"cannot render a {type(thing).__name__}; pass a Mesh, AnisoTexture or PointCloud")
         tex = thing
         if isinstance(thing, Mesh):
-            tkey = (id(thing), "volume", (("directions", build["directions"]), ("resolution", build["resolution"])))
-            cached = self._converted.get(tkey)
-            if cached is not None and cached[0] is thing:
-                tex = cached[1]
-            else:
-                tex = build_texture(thing, build["resolution"], build["directions"])
-                self._converted[tkey] = (thing, tex)
-        if not isinstance(tex, AnisoTexture):
-            raise InputError(f"cannot render a {type(thing).__name__}; pass a Mesh, AnisoTexture or PointCloud")
-        out = tex
-        if method == "splat" and build["per_entry"] == "adaptive":  # counts per entry (build/pyramid.py)
-            opts = (build["placement"], "adaptive", build["point_normal"])
-            out = self.pyramid(tex).level_cloud(0, *opts)[0]
-        elif method == "splat":
-            out = tex.to_points(build["placement"], build["per_entry"], build["point_normal"])
-        self._converted[key] = (thing, out)
-        return out
+            res, dirs = build.resolution, build.directions
+            tex = self.conversions.get_or_make(
+                thing, ("texture", res, dirs), lambda: build_texture(thing, res, dirs)
+            )
+        if method == "volume":
+            return tex
+        opts = (build.placement, build.per_entry, build.point_normal)
+        if build.per_entry == "adaptive":  # counts per entry (lod.py)
+            make = lambda: self.pyramid(tex).level_cloud(0, *opts)[0]  # noqa: E731
+        else:
+            make = lambda: tex.to_points(*opts)  # noqa: E731
+        return self.conversions.get_or_make(tex, ("points", *opts), make)
 
     def pyramid(self, thing, **build) -> Pyramid:
         """The texture pyramid of ``thing`` (a mesh is converted with the
@@ -156,52 +247,49 @@ class Renderer:
             raise InputError(
                 "level of detail needs a mesh or a texture: a point cloud has no texture pyramid"
             )
-        opts = {**DEFAULT_BUILD, **{k: v for k, v in build.items() if v is not None}}
-        tex = self._convert(thing, "volume", opts)
-        hit = self._pyramids.get(id(tex))
-        if hit is None or hit[0] is not tex:
-            hit = self._pyramids[id(tex)] = (tex, pyramid(tex))
-        return hit[1]
+        tex = self._convert(thing, "volume", BuildOptions.parse(**build))
+        return self.conversions.get_or_make(tex, ("pyramid",), lambda: pyramid(tex))
 
-    def _upload_lod(self, thing, method: str, build: dict):
-        """Upload (once) the pyramid of ``thing`` for ``method``."""
-        if method not in ("splat", "volume"):
+    def upload(self, thing, method: str, build: BuildOptions | None = None, **values):
+        """Convert and upload ``thing`` for ``method`` (cached); returns the
+        handle. Build options as ``build`` or as keywords (``lod=True``: the
+        texture's pyramid)."""
+        if method not in METHODS:
+            raise InputError(f"unknown render method '{method}'; choose one of {', '.join(METHODS)}")
+        b = BuildOptions.resolve(build, values)
+        if b.lod and method not in ("splat", "volume"):
             raise InputError(
                 f"level of detail applies to the splat and volume methods, not '{method}'"
             )
-        opts = {**DEFAULT_BUILD, **{k: v for k, v in build.items() if v is not None}}
-        unknown = set(opts) - set(BUILD_OPTIONS)
-        if unknown:
-            raise InputError(f"unknown build option(s) {sorted(unknown)}; known: {BUILD_OPTIONS}")
-        key = (id(thing), method, tuple(sorted(opts.items())) + (("lod", True),))
-        hit = self._uploads.get(key)
-        if hit is not None and hit[0] is thing:
-            return hit[1]
-        pyr = self.pyramid(thing, **opts)
-        if method == "splat":
-            data = LodPoints(pyr, opts["placement"], opts["per_entry"], opts["point_normal"])
+        # Only what changes the upload keys it.
+        used = {"mesh": (), "volume": ("lod",), "splat": ("placement", "per_entry", "point_normal", "lod")}[method]
+        if isinstance(thing, Mesh) and method != "mesh":
+            used += ("resolution", "directions")
+        key = ("upload", method, *((name, getattr(b, name)) for name in used))
+        handle = self.uploads.get(thing, key)
+        if handle is not None:
+            return handle
+        if b.lod:
+            pyr = self.pyramid(thing, resolution=b.resolution, directions=b.directions)
+            data = LodPoints(pyr, b.placement, b.per_entry, b.point_normal) if method == "splat" else pyr
         else:
-            data = pyr
-        handle = self.method_renderer(method).upload(data)
-        self._uploads[key] = (thing, handle)
-        return handle
+            data = self._convert(thing, method, b)
+        impl = self.method_renderer(method)
+        return self.uploads.put(thing, key, impl.upload(data), release=self._releaser(impl))
 
-    def upload(self, thing, method: str, **build):
-        """Convert and upload ``thing`` for ``method`` (cached); returns the handle."""
-        if method not in METHODS:
-            raise InputError(f"unknown render method '{method}'; choose one of {', '.join(METHODS)}")
-        opts = {**DEFAULT_BUILD, **{k: v for k, v in build.items() if v is not None}}
-        unknown = set(opts) - set(BUILD_OPTIONS)
-        if unknown:
-            raise InputError(f"unknown build option(s) {sorted(unknown)}; known: {BUILD_OPTIONS}")
-        key = (id(thing), method, tuple(sorted(opts.items())))
-        hit = self._uploads.get(key)
-        if hit is not None and hit[0] is thing:
-            return hit[1]
-        data = self._convert(thing, method, opts)
-        handle = self.method_renderer(method).upload(data)
-        self._uploads[key] = (thing, handle)
-        return handle
+    def _releaser(self, impl: MethodRenderer):
+        def release(handle) -> None:
+            if self.gl.ctx is not None:  # a context released first took its objects along
+                impl.release(handle)
+
+        return release
+
+    def forget(self, thing) -> None:
+        """Drop now what was made from ``thing``: its uploads (released) and
+        its conversions, and what was made from those."""
+        self.uploads.discard(thing)
+        for value in self.conversions.discard(thing):
+            self.forget(value)
 
     def _fbo(self, size: tuple[int, int]) -> moderngl.Framebuffer:
         fbo = self._fbos.get(size)
@@ -223,29 +311,65 @@ class Renderer:
         ssaa: int = 1,
         alpha: bool = False,
         size=None,
-        **options,
+        *,
+        build: BuildOptions | None = None,
+        options: DrawOptions | None = None,
+        **values,
     ) -> np.ndarray:
         """Draw ``thing`` seen by ``camera``; returns (H, W, 3 or 4) uint8.
 
         ``method`` defaults to what the thing is: mesh -> "mesh", texture ->
         "volume", point cloud -> "splat". ``ssaa`` draws at ssaa x ssaa samples
-        per pixel and box-filters. Build options (resolution, directions,
-        placement, per_entry, point_normal) choose the conversion; other
-        options go to the method's renderer (e.g. ``splat="disc"``,
-        ``quality="high"``).
+        per pixel and box-filters. Build options (:class:`BuildOptions`, as
+        ``build`` or keywords: resolution, directions, placement, per_entry,
+        point_normal, lod) choose the conversion and upload; draw options (the
+        method renderer's ``Options``, as ``options`` or keywords, e.g.
+        ``splat="disc"``, ``quality="high"``) go to the method's renderer.
 
         ``lod=True`` (splat and volume, from a mesh or texture) draws from the
-        texture's pyramid with the screen-space error ``pixel_error``
-        (framebuffer pixels, default 1: with ``ssaa`` the selection is made
-        for the supersampled framebuffer); the clip range comes from every
+        texture's pyramid with the screen-space error ``pixel_error`` (a draw
+        option: framebuffer pixels, default 1; with ``ssaa`` the selection is
+        made for the supersampled framebuffer); the clip range comes from every
         level's bounds, not from what a frame selects. The frame's selection
         is kept in :attr:`last_lod_stats`.
         """
+        return self._draw(thing, camera, method, ssaa, alpha, size, build, options, values)[0]
+
+    def render_frame(
+        self,
+        thing,
+        camera: Camera,
+        method: str | None = None,
+        ssaa: int = 1,
+        alpha: bool = False,
+        size=None,
+        *,
+        build: BuildOptions | None = None,
+        options: DrawOptions | None = None,
+        **values,
+    ) -> Frame:
+        """:meth:`render`, with the frame's depth and statistics: a
+        :class:`~aniso3d.render.frame.Frame` (colour as :meth:`render` returns
+        it; depth the view-axis distance, +inf on the background)."""
+        img, stats, fbo, view = self._draw(thing, camera, method, ssaa, alpha, size, build, options, values)
+        fw, fh = view.size
+        raw = fbo.read(attachment=-1, components=1, dtype="f4")  # the depth attachment
+        window = np.frombuffer(raw, dtype=np.float32).reshape(fh, fw)[::-1]
+        depth = view_depth(window, view.near, view.far)
+        s = view.ssaa
+        if s > 1:  # the nearest sample of each pixel
+            depth = depth.reshape(fh // s, s, fw // s, s).min(axis=(1, 3))
+        return Frame(img, np.ascontiguousarray(depth), self.last_frame_seconds, stats)
+
+    def _draw(self, thing, camera, method, ssaa, alpha, size, build, options, values):
+        """Draw one frame into this size's framebuffer; (image, DrawStats, fbo, view)."""
         if not isinstance(camera, Camera):
             raise InputError(f"render needs an aniso3d.Camera, got {type(camera).__name__}")
         if method is None:
             kinds = ((AnisoTexture, "volume"), (PointCloud, "splat"))
             method = next((m for cls, m in kinds if isinstance(thing, cls)), "mesh")
+        if method not in METHODS:
+            raise InputError(f"unknown render method '{method}'; choose one of {', '.join(METHODS)}")
         if isinstance(ssaa, bool) or int(ssaa) != ssaa or ssaa < 1:
             raise InputError(f"supersampling factor must be a whole number >= 1, got {ssaa!r}")
         ssaa = int(ssaa)
@@ -257,19 +381,15 @@ class Renderer:
                 f"{w}x{h} at {ssaa}x{ssaa} supersampling needs a {fw}x{fh} framebuffer, above this "
                 f"OpenGL's limit of {limit}; lower --ssaa or --size"
             )
-        build = {k: options.pop(k) for k in list(options) if k in BUILD_OPTIONS}
-        lod = options.pop("lod", False)
-        pixel_error = options.pop("pixel_error", None)
-        if lod:
-            handle = self._upload_lod(thing, method, build)
-            # Selected for the framebuffer (view.size): ssaa x ssaa samples per
-            # image pixel, so supersampling also selects finer levels.
-            options["pixel_error"] = 1.0 if pixel_error is None else pixel_error
-        elif pixel_error is not None:
+        names = BuildOptions.names()
+        b = BuildOptions.resolve(build, {k: values.pop(k) for k in list(values) if k in names})
+        if b.lod and method not in ("splat", "volume"):
+            raise InputError(f"level of detail applies to the splat and volume methods, not '{method}'")
+        if not b.lod and values.get("pixel_error", getattr(options, "pixel_error", None)) is not None:
             raise InputError("pixel_error applies with lod=True only")
-        else:
-            handle = self.upload(thing, method, **build)
         impl = self.method_renderer(method)
+        opts = impl.Options.resolve(options, values)
+        handle = self.upload(thing, method, build=b)
         near, far = camera.clip_range(handle.bounds)
         view = FrameView(camera, self.lighting, (fw, fh), near, far, ssaa)
         fbo = self._fbo((fw, fh))
@@ -278,15 +398,15 @@ class Renderer:
         self.gl.ctx.viewport = (0, 0, fw, fh)
         bg = self.lighting.background
         fbo.clear(bg[0], bg[1], bg[2], 0.0, depth=1.0)
-        impl.draw(handle, view, fbo=fbo, **options)
+        stats = impl.draw(handle, view, fbo=fbo, options=opts)
         raw = fbo.read(components=4, dtype="f1")
         self.last_frame_seconds = time.perf_counter() - t0
-        self.last_lod_stats = dict(impl.last_lod_stats) if lod else None
+        self.last_lod_stats = dict(stats.lod) if b.lod and stats.lod is not None else None
         img = np.frombuffer(raw, dtype=np.uint8).reshape(fh, fw, 4)[::-1]
         if ssaa > 1:
-            img = np.round(_downsample(img.astype(np.float32), ssaa)).astype(np.uint8)
+            img = np.round(downsample(img.astype(np.float32), ssaa)).astype(np.uint8)
         img = np.ascontiguousarray(img if alpha else img[:, :, :3])
-        return img
+        return img, stats, fbo, view
 
     def time_frames(self, thing, camera: Camera, method: str | None = None, frames: int = 5,
                     warmup: int = 1, **options) -> float:  # fmt: skip
@@ -325,16 +445,10 @@ class Renderer:
 
     def release(self) -> None:
         """Free every upload and framebuffer; the context too if we made it."""
-        for (_, method, _), (_, handle) in self._uploads.items():
-            if self.gl.ctx is not None:
-                self._impl[method].release(handle)
-        self._uploads.clear()
-        self._converted.clear()
-        self._pyramids.clear()
+        self.uploads.clear()
+        self.conversions.clear()
         for impl in self._impl.values():
-            rel = getattr(impl, "release_all", None)
-            if rel:
-                rel()
+            impl.release_all()
         self._impl.clear()
         if self._own_gl:
             self.gl.release()

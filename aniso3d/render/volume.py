@@ -64,6 +64,7 @@ voxel DDA over the whole grid, float64); the tests hold the two together.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import moderngl
 import numpy as np
@@ -72,8 +73,9 @@ from aniso3d.build.pyramid import Pyramid
 from aniso3d.build.texture import AnisoTexture
 from aniso3d.errors import InputError, ResourceError
 from aniso3d.grid import cell_keys
+from aniso3d.render.base import DrawOptions, number, option_parser
 from aniso3d.render.context import GLContext
-from aniso3d.render.frame import FrameView
+from aniso3d.render.frame import DrawStats, FrameView
 from aniso3d.render.lighting import Lighting, shade_np
 from aniso3d.render.select import volume_level
 
@@ -438,11 +440,44 @@ class GPULodVolume:
         return int(sum(v.nbytes for v in self.levels))
 
 
+@dataclass(frozen=True)
+class VolumeOptions(DrawOptions):
+    """How the volume is drawn (see the module docstring).
+
+    Attributes:
+        step: "dda" (exact voxel chords; the only stepping).
+        density: how the density sphere is read, one of :data:`DENSITY_MODES`.
+        normal: the shading normal of an entry, one of :data:`NORMAL_MODES`.
+        opacity: how coverage adds up along the ray, one of :data:`OPACITY_MODES`.
+        pixel_error: pyramid uploads only: the largest a voxel of the level
+            drawn may be on screen, framebuffer pixels (None: 1).
+    """
+
+    what: ClassVar[str] = "volume"
+
+    step: str = "dda"
+    density: str = "facet"
+    normal: str = "mean"
+    opacity: str = "exponential"
+    pixel_error: float | None = None
+
+    def __post_init__(self) -> None:
+        _check_choice(self.step, STEPS, "volume step")
+        _check_choice(self.density, DENSITY_MODES, "density reading")
+        _check_choice(self.normal, NORMAL_MODES, "normal")
+        _check_choice(self.opacity, OPACITY_MODES, "opacity law")
+        if self.pixel_error is not None:
+            pe = number(self.pixel_error, "volume option pixel_error (pixels)", 0, True)
+            object.__setattr__(self, "pixel_error", pe)
+
+
 class VolumeRenderer:
     """Ray-marches an :class:`~aniso3d.build.texture.AnisoTexture` (one ray per pixel),
     or per frame one level of a :class:`~aniso3d.build.pyramid.Pyramid`."""
 
     method = "volume"
+    Options = VolumeOptions
+    options = option_parser(VolumeOptions)
 
     def __init__(self, gl: GLContext):
         self.gl = gl
@@ -516,48 +551,31 @@ class VolumeRenderer:
         )
 
     def draw(
-        self,
-        handle: GPUVolume,
-        view: FrameView,
-        fbo=None,
-        step: str = "dda",
-        density: str = "facet",
-        normal: str = "mean",
-        opacity: str = "exponential",
-        pixel_error: float | None = None,
-        **unknown,
-    ) -> None:
+        self, handle: GPUVolume | GPULodVolume, view: FrameView, fbo=None,
+        options: VolumeOptions | None = None, **values,
+    ) -> DrawStats:  # fmt: skip
         """Draw into the bound framebuffer (cleared to the background, alpha 0).
 
-        Options: ``step`` "dda" (exact voxel chords; the only stepping),
-        ``density`` "facet" | "kernel" | "nearest" (how the density sphere is
-        read), ``normal`` "mean" | "sample" (the shading normal of an entry),
-        ``opacity`` "exponential" | "linear" (how coverage adds up along the
-        ray; see the module docstring). A pyramid upload
-        (:class:`GPULodVolume`) draws the level :func:`~aniso3d.render.select.volume_level`
-        picks for ``pixel_error`` (framebuffer pixels, default 1).
+        Options: ``options`` (:class:`VolumeOptions`) or the same as keywords.
+        A pyramid upload (:class:`GPULodVolume`) draws the level
+        :func:`~aniso3d.render.select.volume_level` picks for ``pixel_error``
+        (framebuffer pixels, default 1).
         """
-        if unknown:
-            raise InputError(
-                f"unknown volume option(s) {sorted(unknown)}; "
-                "known: step, density, normal, opacity, pixel_error"
-            )
+        opts = VolumeOptions.resolve(options, values)
+        density, normal, opacity = opts.density, opts.normal, opts.opacity
+        stats: dict | None = None
         if isinstance(handle, GPULodVolume):
-            stats: dict = {}
+            stats = {}
             level = volume_level(
                 handle.pyramid, view.camera, view.size,
-                1.0 if pixel_error is None else pixel_error,
+                1.0 if opts.pixel_error is None else opts.pixel_error,
                 near=view.near, far=view.far, stats=stats,
             )  # fmt: skip
             stats["selection_ms"] = 1000.0 * stats.pop("seconds")
             handle.last_stats = self.last_lod_stats = stats
             handle = handle.levels[level]
-        elif pixel_error is not None:
+        elif opts.pixel_error is not None:
             raise InputError("pixel_error applies to a pyramid upload only (upload a Pyramid)")
-        _check_choice(step, STEPS, "volume step")
-        _check_choice(density, DENSITY_MODES, "density reading")
-        _check_choice(normal, NORMAL_MODES, "normal")
-        _check_choice(opacity, OPACITY_MODES, "opacity law")
         cam = view.camera
         right, up, forward = cam.basis()
         t = float(np.tan(np.radians(cam.fov) / 2))
@@ -593,6 +611,9 @@ class VolumeRenderer:
             self.vao.render(moderngl.TRIANGLES, vertices=3)
         finally:
             ctx.depth_func = "<"
+        if stats is None:
+            return DrawStats(drawn=int(handle.n_voxels), unit="voxels")
+        return DrawStats(drawn=int(handle.n_voxels), unit="voxels", levels=(int(stats["level"]),), lod=stats)
 
     def release(self, handle: GPUVolume | GPULodVolume) -> None:
         if isinstance(handle, GPULodVolume):

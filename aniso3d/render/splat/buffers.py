@@ -1,0 +1,285 @@
+"""Points on the GPU: a cloud, or every level of a pyramid, uploaded once
+(:func:`upload_points`, :func:`upload_lod`), and a pyramid frame's selection
+written to its index buffer (:func:`select`).
+
+Points are uploaded once, positions relative to the cloud's centre (float64
+subtraction, then float32), and the shaders never form eye-relative positions
+in float32 either (see splat.vert), so a far-off cloud, or a camera far away
+with a narrow field of view, keeps its precision.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import moderngl
+import numpy as np
+
+from aniso3d.build.points import PointCloud
+from aniso3d.build.pyramid import LodPoints
+from aniso3d.errors import InputError, ResourceError
+from aniso3d.grid import ranges
+from aniso3d.render.context import GLContext
+from aniso3d.render.frame import FrameView
+from aniso3d.render.select import select_voxels
+from aniso3d.render.splat.geometry import morton_order
+
+#: Points per block of the CPU's large-splat test (points are Morton-sorted, so
+#: a block is a compact piece of the cloud).
+BLOCK = 4096
+#: Points per row of the attribute texture (two texels each).
+ATTRIB_PER_ROW = 2048
+#: Vertex attributes of one point, in buffer order, and their float counts.
+ATTRIBUTES = (("in_position", 3), ("in_normal", 3), ("in_size", 1), ("in_kd", 3), ("in_spec", 2))
+#: float32 values per point in the vertex buffer.
+FLOATS_PER_POINT = sum(k for _, k in ATTRIBUTES)
+
+
+
+@dataclass(eq=False)
+class GPUPoints:
+    """A point cloud uploaded once: 12 float32 per point, positions relative to
+    ``origin``, Morton-sorted, in blocks of :data:`BLOCK` points; and the
+    per-point shading attributes again as a texture (two RGBA32F texels per
+    point, :data:`ATTRIB_PER_ROW` points per row) for the deferred shading pass.
+
+    ``block_lo``/``block_hi`` (B, 3) are the blocks' position bounds in the
+    local frame and ``block_size`` (B,) their largest ``sqrt(area)``.
+    """
+
+    vbo: moderngl.Buffer
+    attrib: moderngl.Texture
+    origin: np.ndarray
+    bounds: np.ndarray
+    n_points: int
+    nbytes: int
+    block_start: np.ndarray
+    block_count: np.ndarray
+    block_lo: np.ndarray
+    block_hi: np.ndarray
+    block_size: np.ndarray
+    vaos: dict = field(default_factory=dict)
+    #: Median ``sqrt(area)`` of the points (of level 0 for a pyramid).
+    typical_size: float = 0.0
+
+
+@dataclass(eq=False)
+class GPULodPoints(GPUPoints):
+    """Every level of a pyramid's points (:class:`~aniso3d.build.pyramid.LodPoints`)
+    uploaded once, one after the other in one buffer (finest level first),
+    each level's voxels in Morton order of their grid cells with every voxel's
+    points contiguous. A frame draws only the voxels
+    :func:`~aniso3d.render.select.select_voxels` chooses, through an index buffer
+    rewritten per frame (4 bytes per point drawn), in ascending order.
+
+    ``bounds`` (and so the clip range) covers every level's points, whatever a
+    frame selects. Per level l: ``level_first[l]`` is its first point in the
+    buffer, ``rank[l]`` (M_l,) each voxel's place in Morton order and
+    ``run_first[l]``, ``run_count[l]`` (M_l,) the buffer range of the voxel
+    of each rank. ``last_stats`` is the last frame's selection (see
+    :func:`select`).
+    """
+
+    lod: LodPoints | None = None
+    level_first: np.ndarray | None = None
+    rank: list = field(default_factory=list)
+    run_first: list = field(default_factory=list)
+    run_count: list = field(default_factory=list)
+    level_bounds: np.ndarray | None = None  # (L, 2, 3) each level's point bounds
+    level_size: np.ndarray | None = None  # (L,) each level's largest sqrt(area)
+    index_buffer: moderngl.Buffer | None = None
+    indexed_vaos: dict = field(default_factory=dict)
+    drawn: np.ndarray | None = None  # this frame's indices (sorted uint32)
+    frame_box: tuple | None = None  # (bounds, largest size) of the levels drawn this frame
+    last_stats: dict = field(default_factory=dict)
+
+
+def upload_points(gl: GLContext, cloud: PointCloud | LodPoints) -> GPUPoints:
+    """Upload ``cloud`` once: float64 positions minus the cloud's centre,
+    then float32, so far-off clouds keep their precision.
+
+    A :class:`~aniso3d.build.pyramid.LodPoints` uploads every level of its pyramid
+    (:class:`GPULodPoints`), which :func:`select` draws from per frame."""
+    if isinstance(cloud, LodPoints):
+        return upload_lod(gl, cloud)
+    if not isinstance(cloud, PointCloud):
+        raise InputError(f"the splat renderer draws a PointCloud, got {type(cloud).__name__}")
+    n = len(cloud)
+    if n == 0:
+        raise InputError("cannot draw an empty point cloud (it has no points)")
+    bounds = cloud.bounds
+    origin = 0.5 * (bounds[0] + bounds[1])
+    order = morton_order(cloud.positions - origin)
+    arrays = (cloud.positions, cloud.normals, cloud.areas, cloud.kd, cloud.ks, cloud.shininess)
+    return _upload_arrays(gl, GPUPoints, arrays, order, bounds, origin)
+
+
+def _upload_arrays(gl: GLContext, cls, arrays, order, bounds, origin, **extra) -> GPUPoints:
+    """Upload the points ``order`` of ``arrays`` (positions, normals,
+    areas, kd, ks, shininess), in that order, relative to ``origin``."""
+    positions, normals, areas, kd, ks, shininess = arrays
+    n = len(order)
+    rows = -(-n // ATTRIB_PER_ROW)
+    if rows > gl.max_texture_size:
+        raise ResourceError(
+            f"{n} points need a {2 * ATTRIB_PER_ROW}x{rows} attribute texture, above this "
+            f"OpenGL's limit of {gl.max_texture_size}; draw the cloud in parts"
+        )
+    local = positions[order] - origin
+    size = np.sqrt(areas[order])
+    data = np.empty((n, FLOATS_PER_POINT), dtype=np.float32)
+    data[:, 0:3] = local
+    data[:, 3:6] = normals[order]
+    data[:, 6] = size
+    data[:, 7:10] = kd[order]
+    data[:, 10] = ks[order]
+    data[:, 11] = shininess[order]
+    attrib = np.zeros((rows * ATTRIB_PER_ROW, 8), dtype=np.float32)
+    attrib[:n, 0:3] = data[:, 3:6]
+    attrib[:n, 3] = data[:, 10]
+    attrib[:n, 4:7] = data[:, 7:10]
+    attrib[:n, 7] = data[:, 11]
+    ctx = gl.ctx
+    vbo = gl.track(ctx.buffer(data.tobytes()))
+    tex = gl.track(
+        ctx.texture((2 * ATTRIB_PER_ROW, rows), 4, attrib.tobytes(), dtype="f4")
+    )
+    tex.filter = moderngl.NEAREST, moderngl.NEAREST
+    start = np.arange(0, n, BLOCK)
+    count = np.minimum(BLOCK, n - start)
+    return cls(
+        vbo=vbo,
+        attrib=tex,
+        origin=origin,
+        bounds=bounds,
+        n_points=n,
+        nbytes=data.nbytes + attrib.nbytes,
+        block_start=start,
+        block_count=count,
+        block_lo=np.minimum.reduceat(local, start, axis=0),
+        block_hi=np.maximum.reduceat(local, start, axis=0),
+        block_size=np.maximum.reduceat(size, start),
+        typical_size=float(np.median(size)),
+        **extra,
+    )
+
+
+def upload_lod(gl: GLContext, lod: LodPoints) -> GPULodPoints:
+    """Every level's points in one buffer: level by level, finest first,
+    voxels in Morton order of their cells, a voxel's points together."""
+    pyr = lod.pyramid
+    clouds, parts, rank, run_first, run_count, level_first = [], [], [], [], [], []
+    base = 0
+    for lvl in range(len(pyr)):
+        cloud, off = lod.level_cloud(lvl)
+        m = pyr[lvl].n_voxels
+        vorder = morton_order(pyr[lvl].coords) if m > 1 else np.arange(m)
+        counts = (off[vorder + 1] - off[vorder]).astype(np.int64)
+        r = np.empty(m, dtype=np.int64)
+        r[vorder] = np.arange(m)
+        clouds.append(cloud)
+        parts.append(base + ranges(off[vorder], off[vorder + 1]))
+        rank.append(r)
+        run_first.append(base + np.cumsum(counts) - counts)
+        run_count.append(counts)
+        level_first.append(base)
+        base += len(cloud)
+    if len(clouds[0]) == 0:
+        raise InputError("cannot draw an empty point cloud (it has no points)")
+    if base >= 2**32:
+        raise ResourceError(f"{base} points in all levels are too many for 32-bit indices")
+    bounds = np.stack([
+        np.min([c.bounds[0] for c in clouds if len(c)], axis=0),
+        np.max([c.bounds[1] for c in clouds if len(c)], axis=0),
+    ])  # fmt: skip
+    b0 = clouds[0].bounds  # level 0 keeps the origin a plain upload of its points has
+    origin = 0.5 * (b0[0] + b0[1])
+    arrays = tuple(
+        np.concatenate([getattr(c, name) for c in clouds])
+        for name in ("positions", "normals", "areas", "kd", "ks", "shininess")
+    )
+    empty = np.full((2, 3), np.nan)
+    handle = _upload_arrays(
+        gl, GPULodPoints, arrays, np.concatenate(parts), bounds, origin,
+        lod=lod, level_first=np.asarray(level_first, dtype=np.int64),
+        rank=rank, run_first=run_first, run_count=run_count,
+        level_bounds=np.stack([c.bounds if len(c) else empty for c in clouds]),
+        level_size=np.array([np.sqrt(c.areas.max()) if len(c) else 0.0 for c in clouds]),
+    )  # fmt: skip
+    handle.index_buffer = gl.track(gl.ctx.buffer(reserve=4 * max(len(clouds[0]), 1)))
+    handle.typical_size = float(np.median(np.sqrt(clouds[0].areas)))
+    return handle
+
+
+def select(handle: GPULodPoints, view: FrameView, pixel_error: float = 1.0) -> dict:
+    """This frame's points of a pyramid upload: :func:`~aniso3d.render.select.select_voxels`
+    for the view's camera and framebuffer size (clip range ``view.near``
+    to ``view.far``), their buffer indices written to the index buffer.
+    Returns (and keeps as ``handle.last_stats``) the frame's statistics: ``points`` drawn,
+    ``points_per_level``, ``voxels_per_level``, ``culled`` (voxels found
+    outside the view, their subtrees skipped), ``culled_per_level``,
+    ``total_points`` (uploaded, all levels), ``select_ms`` (the voxel
+    walk), ``index_ms`` (indices made and written) and ``selection_ms``
+    (both)."""
+    pyr = handle.lod.pyramid
+    t0 = time.perf_counter()
+    sel = select_voxels(pyr, view.camera, view.size, pixel_error, near=view.near, far=view.far)
+    t1 = time.perf_counter()
+    firsts, counts, per_level = [], [], []
+    for lvl, vox in enumerate(sel.voxels):
+        if len(vox) == 0:
+            per_level.append(0)
+            continue
+        if len(vox) == len(handle.rank[lvl]):  # the whole level (a near view): one run
+            c = np.array([handle.run_count[lvl].sum()])
+            firsts.append(handle.level_first[lvl : lvl + 1])
+        else:
+            r = np.sort(handle.rank[lvl][vox])
+            c = handle.run_count[lvl][r]
+            firsts.append(handle.run_first[lvl][r])
+        counts.append(c)
+        per_level.append(int(c.sum()))
+    if firsts:
+        f, c = np.concatenate(firsts), np.concatenate(counts)
+        idx = ranges(f, f + c).astype(np.uint32)
+    else:
+        idx = np.zeros(0, dtype=np.uint32)
+    buf = handle.index_buffer
+    if idx.nbytes > buf.size:
+        buf.orphan(max(idx.nbytes, 2 * buf.size))
+    if idx.nbytes:
+        buf.write(idx)
+    handle.drawn = idx
+    used = [lvl for lvl, n in enumerate(per_level) if n]
+    if used:
+        lb = handle.level_bounds[used]
+        box = np.stack([lb[:, 0].min(axis=0), lb[:, 1].max(axis=0)])
+        handle.frame_box = (box, float(handle.level_size[used].max()))
+    else:
+        handle.frame_box = None
+    t2 = time.perf_counter()
+    stats = {
+        "points": int(len(idx)),
+        "points_per_level": per_level,
+        "voxels_per_level": [int(len(v)) for v in sel.voxels],
+        "culled": int(sum(sel.culled)),
+        "culled_per_level": [int(c) for c in sel.culled],
+        "total_points": int(handle.n_points),
+        "level0_points": int(handle.level_first[1] if len(pyr) > 1 else handle.n_points),
+        "pixel_error": float(pixel_error),
+        "select_ms": 1000.0 * (t1 - t0),
+        "index_ms": 1000.0 * (t2 - t1),
+        "selection_ms": 1000.0 * (t2 - t0),
+    }
+    handle.last_stats = stats
+    return stats
+
+
+def release_points(gl: GLContext, handle: GPUPoints) -> None:
+    """Free an upload's GPU objects."""
+    gl.free(*handle.vaos.values(), handle.vbo, handle.attrib)
+    handle.vaos.clear()
+    if isinstance(handle, GPULodPoints):
+        gl.free(*handle.indexed_vaos.values(), handle.index_buffer)
+        handle.indexed_vaos.clear()

@@ -1,0 +1,86 @@
+"""Splat geometry on the CPU, float64: the
+pixels one splat covers (:func:`splat_coverage_np`, the slow, obvious twin of
+the GPU coverage test) and the Z-order the points are uploaded in."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from aniso3d.grid import tangent_frame
+from aniso3d.render.frame import FrameView
+from aniso3d.render.splat.options import DEFAULT_ASPECT, default_size_factor, shape_extent
+
+
+def splat_coverage_np(
+    position,
+    normal,
+    area: float,
+    view: FrameView,
+    shape: str = "square",
+    size_factor: float | None = None,
+    aspect: float = DEFAULT_ASPECT,
+    margin: float = 0.0,
+) -> np.ndarray:
+    """(H, W) bool: the pixels (row 0 at the top) one splat covers, in float64.
+
+    The reference for splat.vert/splat.frag: the ray through each pixel centre
+    meets the splat's plane at view depth t in [near, far] inside the shape;
+    the pixel holding the projected centre is covered too. ``margin`` grows
+    (> 0) or shrinks (< 0) the shape in its normalised coordinates, to tell
+    pixels that are clearly in or out from those on the edge. A splat of zero
+    area covers nothing.
+    """
+    if not area > 0:
+        return np.zeros(view.size[::-1], bool)
+    size_factor = default_size_factor(shape, aspect) if size_factor is None else size_factor
+    cam = view.camera
+    w, h = view.size
+    e = np.asarray(cam.position, np.float64)
+    c = np.asarray(position, np.float64) - e
+    n = np.asarray(normal, np.float64)
+    n = n / np.linalg.norm(n)
+    t_ax, b_ax = tangent_frame(n[None])
+    hu, hv = (x * math.sqrt(area) for x in shape_extent(shape, size_factor, aspect))
+    d = cam.ray_directions((w, h))
+    d = d / (d @ cam.forward)[..., None]  # unit component along the view axis
+    denom = d @ n
+    ok = np.abs(denom) > 1e-9 * np.linalg.norm(d, axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(ok, float(n @ c) / np.where(ok, denom, 1.0), 0.0)
+    q = t[..., None] * d - c
+    u = (q @ t_ax[0]) / hu
+    v = (q @ b_ax[0]) / hv
+    lim = (1.0 + margin) ** 2
+    inside = (
+        u * u + v * v <= lim
+        if shape != "square"
+        else np.maximum(np.abs(u), np.abs(v)) <= 1.0 + margin
+    )
+    cover = ok & inside & (t >= view.near) & (t <= view.far)
+    depth = float(c @ cam.forward)
+    if view.near <= depth <= view.far:
+        r, up, f = cam.basis()
+        tan = math.tan(math.radians(cam.fov) / 2)
+        x = (c @ r) / depth / (tan * view.aspect)
+        y = (c @ up) / depth / tan
+        px, py = (x * 0.5 + 0.5) * w, (y * 0.5 + 0.5) * h
+        if 0 <= px < w and 0 <= py < h:
+            cover[h - 1 - int(math.floor(py)), int(math.floor(px))] = True
+    return cover
+
+
+
+def morton_order(points: np.ndarray) -> np.ndarray:
+    """Indices sorting (N, 3) points along a Z-order curve (10 bits per axis),
+    so consecutive points are close in space."""
+    p = np.asarray(points, np.float64)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    q = ((p - lo) / np.maximum(hi - lo, 1e-300) * 1023.0).astype(np.uint64)
+    code = np.zeros(len(p), np.uint64)
+    for bit in range(10):
+        for axis in range(3):
+            code |= ((q[:, axis] >> np.uint64(bit)) & np.uint64(1)) << np.uint64(3 * bit + axis)
+    return np.argsort(code, kind="stable")
+

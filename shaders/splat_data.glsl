@@ -1,0 +1,35 @@
+// The SplatData interface block: what splat.vert computes per splat and the
+// later stages read, all flat. See splat.vert for what each member means.
+// Each stage declares the block with its own qualifier and instance name:
+//   splat.vert:        out SplatData SPLAT_DATA vs_out;
+//   splat.geom:        in SplatData SPLAT_DATA gs_in[];  out SplatData SPLAT_DATA gs_out;
+//   splat.frag, splat_floor.frag: in SplatData SPLAT_DATA fs_in;
+// and splat.geom passes a splat on with SPLAT_DATA_COPY(gs_out, gs_in[0]).
+// Macros (on one line each: GLSL 3.30 has no line continuation) rather than
+// a struct member, because fragment inputs may not be structs in GLSL 3.30.
+
+// The homography from the screen to the splat's plane (rows hu, hv, hw, hc),
+// the eye's distance from that plane (num) and K / num (kn).
+#define SPLAT_PLANE flat vec3 hu; flat vec3 hv; flat vec3 hw; flat vec3 hc; flat float num; flat float kn;
+// Centre of the pixel holding the projected centre (-1e9 if none), the
+// centre's window depth and the same pushed back by push, and the
+// visibility pass's push-back along the view axis.
+#define SPLAT_CENTRE flat vec2 centre_px; flat float centre_z; flat float centre_zp; flat float push;
+// Index of the point in the uploaded buffer; unit normal (world
+// orientation), diffuse colour and (ks, shininess).
+#define SPLAT_SHADING flat int id; flat vec3 n; flat vec3 kd; flat vec2 spec;
+#ifdef AA
+// Coverage-aware splats: projected centre in pixels (continuous); sub-pixel
+// footprint (half-sides in pixels, amplitude); regime (0: sub-pixel box
+// formula, 1: exact shape); linear depths of the bounding sphere's front and
+// back; shade() at the centre (PASS 2); the pixel box drawn (x0, y0, x1, y1).
+#define SPLAT_COVERAGE flat vec2 cpx; flat vec3 box; flat float regime; flat vec2 zrange; flat vec3 rgb; flat vec4 clip;
+#define SPLAT_COPY_COVERAGE(d, s) d.cpx = s.cpx; d.box = s.box; d.regime = s.regime; d.zrange = s.zrange; d.rgb = s.rgb; d.clip = s.clip;
+#else
+#define SPLAT_COVERAGE
+#define SPLAT_COPY_COVERAGE(d, s)
+#endif
+
+#define SPLAT_DATA { SPLAT_PLANE SPLAT_CENTRE SPLAT_SHADING SPLAT_COVERAGE }
+
+#define SPLAT_DATA_COPY(d, s) d.hu = s.hu; d.hv = s.hv; d.hw = s.hw; d.hc = s.hc; d.num = s.num; d.kn = s.kn; d.centre_px = s.centre_px; d.centre_z = s.centre_z; d.centre_zp = s.centre_zp; d.push = s.push; d.id = s.id; d.n = s.n; d.kd = s.kd; d.spec = s.spec; SPLAT_COPY_COVERAGE(d, s)
