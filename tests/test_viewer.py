@@ -6,8 +6,12 @@ the viewer draws through; the clear messages where no display or no OpenGL
 (Xvfb), driven with xdotool key presses and a mouse drag and checked through
 its own screenshot key, against the headless renderer where the view is known
 exactly. The viewer logs one line per settled state on stdout ("showing mesh
-...", "camera azimuth ...", "screenshot saved to ..."), which is how the
-tests know when to look.
+...", "camera azimuth ...", "overlay off"), one line per frame presented
+after such a change ("frame 12 presented (overlay on; idle): showing ...")
+and the frame each screenshot captured; after an input the tests wait for
+the state's line, then for a frame presented after it, then take the
+screenshot and check it is of a later frame showing that state (see
+:class:`Session`). The state module itself is tested in test_viewer_state.py.
 """
 
 import importlib.util
@@ -210,7 +214,7 @@ class Session:
         self._log = open(self.log_path, "w")
         cmd = [sys.executable, "-m", "aniso3d.app.cli", "view", *args, "--screenshot-dir", str(folder)]
         self.proc = subprocess.Popen(cmd, stdout=self._log, stderr=subprocess.STDOUT, env=self.env)
-        self.frame = 0  # the last frame waited for
+        self.frame, self.state = 0, ""  # the last frame waited for, and the state it showed
         self.end = 0  # log position after the last line waited for
         try:
             self.wid = self.xdo("search", "--sync", "--name", "^aniso3d view", timeout=30).split()[0]
@@ -256,7 +260,7 @@ class Session:
         m = self.wait_for(FRAME_LINE, timeout, after)
         while idle and m.group(3) != "idle":
             m = self.wait_for(FRAME_LINE, timeout, self.end)
-        self.frame = int(m.group(1))
+        self.frame, self.state = int(m.group(1)), m.group(4)
         return self.frame
 
     def settle(self, state: str, after: int, idle: bool = True) -> re.Match:
@@ -288,12 +292,18 @@ class Session:
 
     def screenshot(self) -> np.ndarray:
         """Press the viewer's screenshot key and read the PNG it saved, which
-        must be of a frame after the last one waited for."""
+        must be of a frame after the last one waited for, showing its state."""
+        from PIL import Image
+
         mark = self.mark()
         self.key("c")
         m = self.wait_for(SCREENSHOT_LINE, timeout=30, after=mark)
-        frame = int(m.group(2))
+        with Image.open(m.group(1)) as im:
+            text = dict(im.text)
+        frame = int(text["aniso3d frame"])
+        assert frame == int(m.group(2)), "the PNG and the log name different frames"
         assert frame > self.frame, f"screenshot of frame {frame}, not after frame {self.frame}; log:\n{self.log()}"
+        assert text["aniso3d state"] == self.state, f"the screenshot shows another state; log:\n{self.log()}"
         return load_png(m.group(1))
 
     def close(self, key: str, timeout: float = 15) -> int:

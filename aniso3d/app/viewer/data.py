@@ -119,7 +119,7 @@ class Conversions:
             wanted += [self.texture_key(state), self.points_key(state)]
         elif self.kind == "texture":
             wanted += [self.points_key(state)]
-        return [k for k in wanted if k is not None]
+        return list(dict.fromkeys(k for k in wanted if k is not None))
 
     def lookup(self, key: tuple):
         """The value of ``key`` if it is at hand (the input, or built and cached), else None."""

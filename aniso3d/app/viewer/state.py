@@ -172,9 +172,9 @@ class Orbit:
 
     def zoom(self, steps: float) -> None:
         """Move closer by ``steps`` wheel notches (negative: farther)."""
-        lo, hi = ZOOM_LIMITS
-        d = self.distance * ZOOM_PER_STEP**steps
-        self.distance = float(np.clip(d, lo * self.home_distance, hi * self.home_distance))
+        lo, hi = (math.log(f * self.home_distance) for f in ZOOM_LIMITS)
+        log_d = math.log(self.distance) + steps * math.log(ZOOM_PER_STEP)  # no overflow for any steps
+        self.distance = math.exp(min(max(log_d, lo), hi))
 
     def spin(self, seconds: float) -> None:
         """The turntable: turn the eye about +y at :data:`TURNTABLE_DEGREES_PER_SECOND`."""

@@ -11,7 +11,8 @@ for the user and what the tests wait for. After each buffer swap that shows
 something new since the last such line, the viewer logs
 ``frame N presented (overlay on|off; idle|building WHAT): STATUS``, N counting
 every presented frame; a screenshot is the frame presented on its key press,
-logged as ``screenshot saved to PATH (frame N)``. A test that sends a key
+logged as ``screenshot saved to PATH (frame N)`` and recorded in the PNG's
+text (``aniso3d frame``: N, ``aniso3d state``: STATUS). A test that sends a key
 thus waits for the state's line, then for a frame presented after it, before
 it looks.
 """
@@ -19,6 +20,7 @@ it looks.
 from __future__ import annotations
 
 import importlib.util
+import io
 import os
 import sys
 import time
@@ -32,8 +34,8 @@ from aniso3d.app.viewer.overlay import GREEN, MARGIN, RED, WHITE, YELLOW, Overla
 from aniso3d.app.viewer.scene import SceneView
 from aniso3d.app.viewer.state import KEYS, Settings, ViewState
 from aniso3d.errors import InputError, ResourceError
+from aniso3d.files import atomic_write
 from aniso3d.render.context import GLContext
-from aniso3d.render.images import save_png
 from aniso3d.render.renderer import Renderer
 
 HEADLESS_HINT = (
@@ -42,8 +44,24 @@ HEADLESS_HINT = (
 )
 #: Seconds a notice stays in the status panel (errors: twice as long).
 NOTICE_SECONDS = 4.0
+#: Prefix of a screenshot's PNG text keys: "aniso3d frame" (the frame's number), "aniso3d state".
+SCREENSHOT_TEXT = "aniso3d"
 #: Frame pacing: frames per second while something moves or builds, and while idle.
 BUSY_FPS, IDLE_FPS = 60, 30
+
+
+def save_screenshot(path: Path, image: np.ndarray, text: dict[str, str]) -> Path:
+    """Write an (H, W, 3) uint8 image as PNG, atomically, with ``text`` as its
+    text chunks under keys prefixed :data:`SCREENSHOT_TEXT` ("aniso3d frame": "12")."""
+    from PIL import Image
+    from PIL.PngImagePlugin import PngInfo
+
+    info = PngInfo()
+    for key, value in text.items():
+        info.add_itxt(f"{SCREENSHOT_TEXT} {key}", value)
+    buf = io.BytesIO()
+    Image.fromarray(image).save(buf, format="PNG", pnginfo=info)
+    return atomic_write(path, buf.getvalue())
 
 
 def check_display() -> None:
@@ -279,14 +297,16 @@ class Viewer:
     def screenshot(self) -> None:
         """Present a frame now, after the events before this key (not after
         later ones in the same batch), and save it as the next
-        ``aniso3d-view-NNN.png`` in the screenshot folder."""
+        ``aniso3d-view-NNN.png`` in the screenshot folder, with the frame's
+        number and state in the PNG's text (:data:`SCREENSHOT_TEXT`)."""
         image = self._present(capture=True)
         n = 1
         while (self.screenshot_dir / f"aniso3d-view-{n:03d}.png").exists():
             n += 1
+        text = {"frame": str(self._frames), "state": self.scene.status}
         try:
-            path = save_png(self.screenshot_dir / f"aniso3d-view-{n:03d}.png", image)
-        except (OSError, InputError) as exc:
+            path = save_screenshot(self.screenshot_dir / f"aniso3d-view-{n:03d}.png", image, text)
+        except OSError as exc:
             self._notify(f"screenshot not saved: {exc}", RED)
             return
         self._notify(f"screenshot saved to {path} (frame {self._frames})", GREEN)
