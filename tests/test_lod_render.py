@@ -256,33 +256,26 @@ def test_lod_options_are_checked(r, scene):
 def test_viewer_toggles_lod_with_l(xserver, tmp_path):  # noqa: F811
     """``l`` switches the volume and the splats to the pyramid and back; the
     image stays that of the finest level to within a grey level (32 voxels
-    in a 320 x 240 window: the finest level covers more than a pixel)."""
+    in a 320 x 240 window: the finest level covers more than a pixel).
+
+    Every screenshot is of a frame presented after the state it checks, with
+    no build under way (a build shows a badge over the scene)."""
     mesh = aniso3d.scenes.tree(levels=4, leaves_per_twig=20)
     path = aniso3d.build_texture(mesh, 32, 64).save(tmp_path / "tree.a3d")
     s = Session(xserver, tmp_path, [str(path), "--size", "320x240"])
     try:
-        s.wait_for(r"showing volume .* at 320x240, .*voxels 32³ K=64$")
-        s.key("o")
+        s.settle(r"showing volume .* at 320x240, .*voxels 32³ K=64$", after=0)
+        s.press("o", r"overlay off$")
         for method in ("volume", "splat"):
             if method == "splat":
-                mark = len(s.log())
-                s.key("3")
-                s.wait_for(r"showing splat \(.*voxels 32³ K=64$", after=mark)
+                s.press("3", r"showing splat \(.*voxels 32³ K=64$")
             single = s.screenshot()
-            mark = len(s.log())
-            s.key("l")
-            s.wait_for(rf"showing {method} \(.*level of detail$", after=mark)
+            s.press("l", rf"showing {method} \(.*level of detail$")
             lod = s.screenshot()
             assert drawn(lod) > 0.9 * drawn(single) and mean_diff(lod, single) < 1.0
-            # Back to the single level; wait for it, or the next key may land
-            # before the viewer has shown (and logged) the change.
-            mark = len(s.log())
-            s.key("l")
-            s.wait_for(rf"showing {method} \(.*voxels 32³ K=64$", after=mark)
-        s.key("o")
-        mark = len(s.log())
-        s.key("l")
-        s.wait_for(r"showing splat \(.*level of detail$", after=mark)
+            s.press("l", rf"showing {method} \(.*voxels 32³ K=64$")
+        s.press("o", r"overlay on$")
+        s.press("l", r"showing splat \(.*level of detail$")
         assert s.close("q") == 0, s.log()
         assert "Traceback" not in s.log()
     finally:

@@ -6,8 +6,12 @@ the viewer draws through; the clear messages where no display or no OpenGL
 (Xvfb), driven with xdotool key presses and a mouse drag and checked through
 its own screenshot key, against the headless renderer where the view is known
 exactly. The viewer logs one line per settled state on stdout ("showing mesh
-...", "camera azimuth ...", "screenshot saved to ..."), which is how the
-tests know when to look.
+...", "camera azimuth ...", "overlay off"), one line per frame presented
+after such a change ("frame 12 presented (overlay on; idle): showing ...")
+and the frame each screenshot captured; after an input the tests wait for
+the state's line, then for a frame presented after it, then take the
+screenshot and check it is of a later frame showing that state (see
+:class:`Session`). The state module itself is tested in test_viewer_state.py.
 """
 
 import importlib.util
@@ -187,8 +191,20 @@ def xserver():
     proc.wait(timeout=10)
 
 
+#: The line the viewer logs after a buffer swap that shows something new:
+#: frame number, overlay, build under way (or idle), and the state shown.
+FRAME_LINE = r"^aniso3d view: frame (\d+) presented \(overlay (on|off); (idle|building .*?)\): (.*)$"
+SCREENSHOT_LINE = r"^aniso3d view: screenshot saved to (.+\.png) \(frame (\d+)\)$"
+
+
 class Session:
-    """One ``aniso3d view`` process in the virtual X server, and its log."""
+    """One ``aniso3d view`` process in the virtual X server, and its log.
+
+    The protocol: after an input, wait for the log line of the state it leads
+    to, then for a frame presented after that line (with no build under way,
+    unless told otherwise), and only then take a screenshot; the screenshot's
+    own log line names the frame it captured, which must be a later one.
+    """
 
     def __init__(self, display: str, folder, args: list[str]):
         self.env = {k: v for k, v in os.environ.items() if k != "WAYLAND_DISPLAY"}
@@ -198,15 +214,14 @@ class Session:
         self._log = open(self.log_path, "w")
         cmd = [sys.executable, "-m", "aniso3d.app.cli", "view", *args, "--screenshot-dir", str(folder)]
         self.proc = subprocess.Popen(cmd, stdout=self._log, stderr=subprocess.STDOUT, env=self.env)
-        self.shots = 0
+        self.frame, self.state = 0, ""  # the last frame waited for, and the state it showed
+        self.end = 0  # log position after the last line waited for
         try:
-            self.wid = self.xdo("search", "--sync", "--name", "^aniso3d view", timeout=30).split()[
-                0
-            ]
+            self.wid = self.xdo("search", "--sync", "--name", "^aniso3d view", timeout=30).split()[0]
         except subprocess.TimeoutExpired:
             self.kill()
             pytest.fail(f"the viewer window did not appear; log:\n{self.log()}")
-        self.xdo("mousemove", "--window", self.wid, "20", "20")
+        self.xdo("mousemove", "--window", self.wid, "--sync", "20", "20")
         self.xdo("windowfocus", "--sync", self.wid)
 
     def xdo(self, *args, timeout=10) -> str:
@@ -218,42 +233,77 @@ class Session:
     def log(self) -> str:
         return self.log_path.read_text()
 
+    def mark(self) -> int:
+        """The log's length now: wait for lines after it."""
+        return len(self.log())
+
     def wait_for(self, pattern: str, timeout: float = 60, after: int = 0) -> re.Match:
-        """The first log line matching ``pattern`` at or after character ``after``."""
+        """The first complete log line matching ``pattern`` at or after
+        character ``after``; ``self.end`` is set to the log position after it."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
-            m = re.search(pattern, self.log()[after:], re.M)
+            text = self.log()
+            text = text[: text.rfind("\n") + 1]  # whole lines only: the viewer may be mid-write
+            m = re.compile(pattern, re.M).search(text, after)
             if m:
+                self.end = text.index("\n", m.end()) + 1 if m.end() < len(text) else len(text)
                 return m
             if self.proc.poll() is not None:
                 break
-            time.sleep(0.05)
+            time.sleep(0.05)  # poll the log file
         self.kill()
         pytest.fail(f"no log line /{pattern}/ within {timeout} s; log:\n{self.log()}")
+
+    def presented(self, after: int, idle: bool = True, timeout: float = 60) -> int:
+        """Wait for a frame presented after log position ``after`` (``idle``:
+        with no build under way); its number."""
+        m = self.wait_for(FRAME_LINE, timeout, after)
+        while idle and m.group(3) != "idle":
+            m = self.wait_for(FRAME_LINE, timeout, self.end)
+        self.frame, self.state = int(m.group(1)), m.group(4)
+        return self.frame
+
+    def settle(self, state: str, after: int, idle: bool = True) -> re.Match:
+        """Wait for the log line ``aniso3d view: STATE`` (a pattern) after
+        ``after``, then for a frame presented after that line; the line's match."""
+        m = self.wait_for(rf"^aniso3d view: (?:{state})", after=after)
+        self.presented(self.end, idle)
+        return m
+
+    def press(self, key: str, state: str, idle: bool = True) -> re.Match:
+        """Send ``key`` and :meth:`settle` on the ``state`` it leads to."""
+        mark = self.mark()
+        self.key(key)
+        return self.settle(state, mark, idle)
 
     def key(self, *names: str) -> None:
         self.xdo("key", *names)
 
     def drag(self, dx: int, dy: int = 0, button: str = "1", steps: int = 12) -> None:
+        """Press ``button`` at (150, 120) in the window, move by (dx, dy) in
+        ``steps`` (each one waited for by xdotool) and release."""
         x0, y0 = 150, 120
-        self.xdo("mousemove", "--window", self.wid, str(x0), str(y0))
+        self.xdo("mousemove", "--window", self.wid, "--sync", str(x0), str(y0))
         self.xdo("mousedown", button)
         for i in range(1, steps + 1):
-            self.xdo(
-                "mousemove",
-                "--window",
-                self.wid,
-                str(x0 + dx * i // steps),
-                str(y0 + dy * i // steps),
-            )
-            time.sleep(0.02)
+            x, y = x0 + dx * i // steps, y0 + dy * i // steps
+            self.xdo("mousemove", "--window", self.wid, "--sync", str(x), str(y))
         self.xdo("mouseup", button)
 
     def screenshot(self) -> np.ndarray:
-        """Press the viewer's screenshot key and read the PNG it saved."""
-        mark = len(self.log())
+        """Press the viewer's screenshot key and read the PNG it saved, which
+        must be of a frame after the last one waited for, showing its state."""
+        from PIL import Image
+
+        mark = self.mark()
         self.key("c")
-        m = self.wait_for(r"screenshot saved to (.+\.png)$", timeout=30, after=mark)
+        m = self.wait_for(SCREENSHOT_LINE, timeout=30, after=mark)
+        with Image.open(m.group(1)) as im:
+            text = dict(im.text)
+        frame = int(text["aniso3d frame"])
+        assert frame == int(m.group(2)), "the PNG and the log name different frames"
+        assert frame > self.frame, f"screenshot of frame {frame}, not after frame {self.frame}; log:\n{self.log()}"
+        assert text["aniso3d state"] == self.state, f"the screenshot shows another state; log:\n{self.log()}"
         return load_png(m.group(1))
 
     def close(self, key: str, timeout: float = 15) -> int:
@@ -316,18 +366,18 @@ def test_display_without_opengl_33_is_a_clear_message_and_status_2(xserver):
 def test_window_switches_renderers_rotates_on_drag_resizes_and_quits(xserver, tmp_path):
     s = Session(xserver, tmp_path, ["scene:cube", "--size", "400x300", "--resolution", "16"])
     try:
-        s.wait_for(r"showing mesh \(12 triangles\) at 400x300")
+        s.settle(r"showing mesh \(12 triangles\) at 400x300", after=0)
         with_overlay = s.screenshot()
-        s.key("o")  # overlay off: compare scenes, not frame-time digits
+        s.press("o", r"overlay off$")  # compare scenes, not frame-time digits
         mesh = s.screenshot()
         assert mesh.shape == (300, 400, 3)
         assert mean_diff(with_overlay[:60, :200], mesh[:60, :200]) > 5, "no overlay drawn"
         assert drawn(mesh) > 0.1 * mesh.shape[0] * mesh.shape[1], "the cube is not drawn"
 
         # A horizontal drag turns the view about the vertical axis.
-        mark = len(s.log())
+        mark = s.mark()
         s.drag(120, 0)
-        m = s.wait_for(r"camera azimuth ([\d.]+) elevation ([-\d.]+)", after=mark)
+        m = s.settle(r"camera azimuth ([\d.]+) elevation ([-\d.]+)", after=mark)
         assert float(m.group(1)) == pytest.approx(
             (HOME_AZIMUTH - 120 * DEGREES_PER_PIXEL) % 360, abs=1.0
         )
@@ -339,42 +389,34 @@ def test_window_switches_renderers_rotates_on_drag_resizes_and_quits(xserver, tm
         if expected is not None:
             assert mean_diff(turned, expected) < 0.5, "the drag did not turn the view as expected"
             assert mean_diff(mesh, headless_view(scenes.cube(), (400, 300))) < 0.5
-        s.key("r")
-        s.wait_for(rf"camera azimuth {HOME_AZIMUTH:.1f} elevation {HOME_ELEVATION:.1f}", after=mark)
+        s.press("r", rf"camera azimuth {HOME_AZIMUTH:.1f} elevation {HOME_ELEVATION:.1f}")
         assert mean_diff(s.screenshot(), mesh) < 0.05, "reset did not return to the start view"
 
         # Quality "high" draws the polygons at 2x2 samples per pixel, box-filtered.
-        mark = len(s.log())
-        s.key("h")
-        s.wait_for(r"showing mesh .* quality high", after=mark)
+        s.press("h", r"showing mesh .* quality high$")
         high = s.screenshot()
         expected = headless_view(scenes.cube(), (400, 300), ssaa=2)
         if expected is not None:
             assert mean_diff(high, expected) < 0.5 and mean_diff(high, mesh) > 0.01
-        s.key("h")
+        s.press("h", r"showing mesh .* quality fast$")
 
-        # Switching renderer changes the image: to the volume and splat
-        # renderers, or to a message saying one is not available.
+        # Switching renderer changes the image: to the volume and splat renderers.
         images = {"mesh": mesh}
         for key, method in (("2", "volume"), ("3", "splat")):
-            mark = len(s.log())
-            s.key(key)
-            m = s.wait_for(rf"^aniso3d view: (showing|unavailable|failed) {method}", after=mark)
-            if m.group(1) == "failed":
-                pytest.fail(f"the {method} renderer failed in the viewer; log:\n{s.log()}")
+            m = s.press(key, rf"(showing|unavailable|failed) {method}")
+            if m.group(1) != "showing":
+                pytest.fail(f"the {method} renderer did not draw in the viewer; log:\n{s.log()}")
             img = s.screenshot()
             assert mean_diff(img, mesh) > 1, f"switching to {method} did not change the image"
-            if m.group(1) == "showing":
-                assert drawn(img) > 0.5 * drawn(mesh), f"the {method} renderer drew too little"
+            assert drawn(img) > 0.5 * drawn(mesh), f"the {method} renderer drew too little"
             images[method] = img
-        if "unavailable" not in s.log():
-            assert mean_diff(images["volume"], images["splat"]) > 0.5
+        assert mean_diff(images["volume"], images["splat"]) > 0.5
 
         # Resizing the window re-renders at the new size.
-        s.key("1")
-        mark = len(s.log())
+        s.press("1", r"showing mesh .* at 400x300")
+        mark = s.mark()
         s.xdo("windowsize", s.wid, "320", "240")
-        s.wait_for(r"showing mesh .* at 320x240", after=mark)
+        s.settle(r"showing mesh .* at 320x240", after=mark)
         small = s.screenshot()
         assert small.shape == (240, 320, 3) and drawn(small) > 0.1 * 320 * 240
 
@@ -390,7 +432,7 @@ def test_window_answers_while_a_texture_builds_and_esc_quits(xserver, tmp_path):
     s = Session(xserver, tmp_path, ["--size", "400x300", "--resolution", "64"])
     try:
         s.wait_for(r"building texture 64")
-        s.wait_for(r"showing mesh \(262,140 triangles\)")
+        s.settle(r"showing mesh \(262,140 triangles\)", after=0, idle=False)
         img = s.screenshot()
         log = s.log()
         assert "built texture" not in log[: log.index("screenshot saved")], (

@@ -1,4 +1,4 @@
-"""``aniso3d view``: the interactive window (see :mod:`aniso3d.app.viewer`).
+"""``aniso3d view``: the interactive window (the package :mod:`aniso3d.app.viewer`).
 
 Registered by :func:`aniso3d.app.cli.build_parser`. Errors (a bad input, no
 display, no OpenGL, pyglet missing) are :class:`~aniso3d.errors.Aniso3DError`
@@ -12,11 +12,9 @@ from pathlib import Path
 
 from aniso3d.app.common import image_size, load_input, positive_int
 
-METHOD_CHOICES = ("mesh", "volume", "splat")
-
 
 def register(sub) -> None:
-    from aniso3d.app.viewer import CONTROLS, DEFAULT_RESOLUTION, QUALITIES, SPLATS
+    from aniso3d.app.viewer import CONTROLS, DEFAULT_RESOLUTION, METHODS, QUALITIES, SPLATS
     from aniso3d.build.scenes import SCENES
     from aniso3d.build.texture import DEFAULT_DIRECTIONS
 
@@ -36,7 +34,7 @@ def register(sub) -> None:
                    help="mesh file, saved texture (.a3d), PLY point cloud, or scene:NAME "
                         f"({', '.join(SCENES)}); default: the built-in tree")  # fmt: skip
     p.add_argument("--size", type=image_size, default=(960, 640), help="window size, e.g. 1280x800")
-    p.add_argument("--method", choices=METHOD_CHOICES, default=None,
+    p.add_argument("--method", choices=METHODS, default=None,
                    help="renderer to start with (default: what the input is)")  # fmt: skip
     p.add_argument("--resolution", "-r", type=positive_int, default=DEFAULT_RESOLUTION,
                    help="voxels along the longest axis when a mesh is converted")  # fmt: skip
