@@ -44,12 +44,12 @@ import numpy as np
 import aniso3d
 from aniso3d.build.pyramid import pyramid
 from aniso3d.metrics import psnr, ssim
-from aniso3d.render.camera import Camera
-from aniso3d.render.frame import FrameView
-from aniso3d.render.images import save_png
-from aniso3d.render.renderer import Renderer
-from aniso3d.render.select import select_voxels, selection_points
-from aniso3d.render.splat import ATTRIB_PER_ROW, FLOATS_PER_POINT
+from aniso3d.rendering.camera import Camera
+from aniso3d.rendering.frame import FrameView
+from aniso3d.rendering.images import save_png
+from aniso3d.rendering.renderer import Renderer
+from aniso3d.rendering.select import select_voxels, selection_points
+from aniso3d.rendering.splat import ATTRIB_PER_ROW, FLOATS_PER_POINT
 
 BEGIN, END = "<!-- bench_lod:begin -->", "<!-- bench_lod:end -->"
 DISTANCES = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)

@@ -22,11 +22,11 @@ from pathlib import Path
 import numpy as np
 
 import aniso3d
-from aniso3d.render.camera import Camera
-from aniso3d.render.frame import FrameView
-from aniso3d.render.images import save_png
-from aniso3d.render.renderer import Renderer
-from aniso3d.render.splat import SHAPES
+from aniso3d.rendering.camera import Camera
+from aniso3d.rendering.frame import FrameView
+from aniso3d.rendering.images import save_png
+from aniso3d.rendering.renderer import Renderer
+from aniso3d.rendering.splat import SHAPES
 
 
 def main() -> None:

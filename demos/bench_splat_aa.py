@@ -46,9 +46,9 @@ import numpy as np
 import aniso3d
 from aniso3d.bench.cli_tmp import crop_box
 from aniso3d.metrics import flip, flip_available, psnr, ssim
-from aniso3d.render.camera import Camera
-from aniso3d.render.images import save_png
-from aniso3d.render.renderer import Renderer
+from aniso3d.rendering.camera import Camera
+from aniso3d.rendering.images import save_png
+from aniso3d.rendering.renderer import Renderer
 
 BEGIN, END = "<!-- bench_splat_aa:begin -->", "<!-- bench_splat_aa:end -->"
 SCALES = (1.0, 2.3, 4.6, 9.0, 18.0)

@@ -18,8 +18,8 @@ import numpy as np
 
 import aniso3d
 from aniso3d.build.texture import AnisoTexture
-from aniso3d.render.camera import Camera
-from aniso3d.render.renderer import Renderer
+from aniso3d.rendering.camera import Camera
+from aniso3d.rendering.renderer import Renderer
 
 
 def frame_times(r: Renderer, thing, cam: Camera, method: str, frames: int, **opts):

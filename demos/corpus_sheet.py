@@ -32,9 +32,9 @@ import aniso3d
 from aniso3d.build import scenes
 from aniso3d.build.texture import DEFAULT_DIRECTIONS
 from aniso3d.files import atomic_write
-from aniso3d.render.camera import Camera
-from aniso3d.render.images import save_png
-from aniso3d.render.renderer import Renderer
+from aniso3d.rendering.camera import Camera
+from aniso3d.rendering.images import save_png
+from aniso3d.rendering.renderer import Renderer
 
 BEGIN, END = "<!-- corpus:begin -->", "<!-- corpus:end -->"
 

@@ -227,7 +227,7 @@ def case_memory_refusal(quick):
 
 
 def _renderer():
-    from aniso3d.render.renderer import Renderer
+    from aniso3d.rendering.renderer import Renderer
 
     return Renderer((512, 512))
 
@@ -235,7 +235,7 @@ def _renderer():
 def case_render_far(quick):
     # telephoto from 1e3 .. 1e7 radii: the same picture (to 0.5% of pixels)
     from aniso3d import build_texture, scenes
-    from aniso3d.render.camera import Camera
+    from aniso3d.rendering.camera import Camera
 
     sphere = scenes.sphere(1.0, subdivisions=5, center=(0.3, 0.2, 0.0))
     tex = build_texture(sphere, 64, 64)
@@ -262,7 +262,7 @@ def case_render_far(quick):
 def case_render_1e7(quick):
     # the default tree and its texture moved by 1e7, camera with it
     from aniso3d import PointCloud, build_texture, scenes
-    from aniso3d.render.camera import Camera
+    from aniso3d.rendering.camera import Camera
 
     tree = scenes.tree(levels=5 if quick else 6)
     tree = moved(tree)  # a copy
@@ -292,7 +292,7 @@ def case_render_1e7(quick):
 def case_render_inside(quick):
     # camera inside a sphere: the inside all around
     from aniso3d import scenes
-    from aniso3d.render.camera import Camera
+    from aniso3d.rendering.camera import Camera
 
     sphere = scenes.sphere(1.0, subdivisions=5)
     cam = Camera((0.2, -0.1, 0.1), (1.0, 0.3, 0.5), fov=90)

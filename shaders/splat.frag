@@ -46,7 +46,7 @@
 //     boundary. For the layers from DEEP on, the coverage of resolved splats
 //     (c times the regime weight) also goes to f_resolved (channel = layer -
 //     DEEP). A splat whose box is wider than u_shade_box pixels is shaded per
-//     fragment in layer 0 (in the geometry path, which aniso3d/render/splat sends
+//     fragment in layer 0 (in the geometry path, which aniso3d/rendering/splat sends
 //     those splats through); any other fragment takes its splat's colour
 //     shaded once at the centre (SplatData.rgb). splat_aa_resolve.frag composites the layers.
 #include "lighting.glsl"

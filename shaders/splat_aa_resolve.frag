@@ -13,7 +13,7 @@
 //     each other at random, its resolved ones tile, so it covers
 //     a = T (1 - (1 - min(1, resolved)) exp(-(sum - resolved)));
 //   each adds a (its coverage-weighted mean colour) and T -= a.
-// Out, by u_mode (aniso3d.render.splat.coverage.HighPass.composite), C the colour so
+// Out, by u_mode (aniso3d.rendering.splat.coverage.HighPass.composite), C the colour so
 // composited (premultiplied):
 //   0 (over what the target holds):  (C, 1 - T), blended src + (1 - src.a) dst;
 //   1, 2 (under it):  the positive, then the negative part of

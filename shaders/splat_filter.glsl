@@ -1,5 +1,5 @@
 // The pixel filter of the coverage-aware splats (quality "high"), in pixels.
-// FILTER (injected from aniso3d/render/splat/params.py): 1 the tent of radius 1 (bilinear
+// FILTER (injected from aniso3d/rendering/splat/params.py): 1 the tent of radius 1 (bilinear
 // weights), 2 the quadratic B-spline of radius 1.5. Both are B-splines, so
 // their copies at the pixel centres sum to exactly 1 anywhere: a box-shaped
 // footprint filtered by either and sampled at the pixel centres gives back

@@ -3,7 +3,7 @@
 import pytest
 
 from aniso3d import ResourceError
-from aniso3d.render.renderer import Renderer
+from aniso3d.rendering.renderer import Renderer
 
 #: Image size of the shared renderer: small enough for llvmpipe, large enough
 #: that test objects span many pixels.

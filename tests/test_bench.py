@@ -14,7 +14,7 @@ import pytest
 from aniso3d import scenes
 from aniso3d.app import cli
 from aniso3d.bench import cli_tmp as bench
-from aniso3d.render.camera import Camera
+from aniso3d.rendering.camera import Camera
 
 # ------------------------------------------------------------ without a GPU
 
@@ -152,9 +152,9 @@ def test_case_render_options():
 
 
 def test_missing_renderer_is_skipped_other_errors_fail():
-    exc = ModuleNotFoundError("No module named 'aniso3d.render.splat'", name="aniso3d.render.splat")
+    exc = ModuleNotFoundError("No module named 'aniso3d.rendering.splat'", name="aniso3d.rendering.splat")
     status, reason = bench.classify_failure(exc, "splat")
-    assert status == "skipped" and "render.splat" in reason
+    assert status == "skipped" and "rendering.splat" in reason
     assert bench.classify_failure(NotImplementedError("soon"), "volume")[0] == "skipped"
     assert bench.classify_failure(ValueError("bad"), "volume") == ("failed", "ValueError: bad")
     other = ModuleNotFoundError("No module named 'numpy'", name="numpy")
@@ -181,7 +181,7 @@ def test_csv_and_json_keep_every_column_and_mark_unmeasured_values():
 @pytest.fixture(scope="module")
 def gl_available():
     from aniso3d.errors import ResourceError
-    from aniso3d.render.context import GLContext
+    from aniso3d.rendering.context import GLContext
 
     try:
         GLContext().release()
@@ -250,14 +250,14 @@ def test_bench_smoke_end_to_end(gl_available, tmp_path, capsys):
 
 @pytest.mark.gpu
 def test_unavailable_renderer_is_recorded_as_skipped(gl_available, tmp_path, monkeypatch):
-    from aniso3d.render.renderer import Renderer
+    from aniso3d.rendering.renderer import Renderer
 
     real = Renderer.method_renderer
 
     def no_splat(self, method):
         if method == "splat":
             raise ModuleNotFoundError(
-                "No module named 'aniso3d.render.splat'", name="aniso3d.render.splat"
+                "No module named 'aniso3d.rendering.splat'", name="aniso3d.rendering.splat"
             )
         return real(self, method)
 
@@ -267,7 +267,7 @@ def test_unavailable_renderer_is_recorded_as_skipped(gl_available, tmp_path, mon
     mesh = scenes.tree(levels=4, leaves_per_twig=20)
     result = bench.run_bench(mesh, settings, with_flip=False)
     splat = [r for r in result.rows if r["method"] == "splat"]
-    assert splat and all(r["status"] == "skipped" and "render.splat" in r["reason"] for r in splat)
+    assert splat and all(r["status"] == "skipped" and "rendering.splat" in r["reason"] for r in splat)
     assert all(r["status"] == "ok" for r in result.rows if r["method"] != "splat")
     # Built and counted even when not drawn (level-of-detail points are made by
     # the renderer, so they have no separate point set).

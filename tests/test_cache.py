@@ -12,8 +12,8 @@ import pytest
 
 import aniso3d
 from aniso3d import InputError, PointCloud
-from aniso3d.render.cache import Cache
-from aniso3d.render.camera import Camera
+from aniso3d.rendering.cache import Cache
+from aniso3d.rendering.camera import Camera
 
 
 class Thing:
@@ -157,7 +157,7 @@ def test_a_new_cloud_at_a_dead_clouds_id_is_drawn_from_its_own_upload(r):
 
 @pytest.mark.gpu
 def test_the_upload_bound_evicts_and_frees_gpu_objects(r):
-    from aniso3d.render.renderer import Renderer
+    from aniso3d.rendering.renderer import Renderer
 
     clouds = [coloured_quad((0.5, 0.5, 0.5), axis) for axis in range(3)]
     base = r.gl.n_objects
@@ -178,7 +178,7 @@ def test_the_upload_bound_evicts_and_frees_gpu_objects(r):
 
 @pytest.mark.gpu
 def test_forget_drops_conversions_and_uploads_made_from_a_mesh(r):
-    from aniso3d.render.renderer import Renderer
+    from aniso3d.rendering.renderer import Renderer
 
     mesh = aniso3d.scenes.sphere(1.0, subdivisions=2)
     cam = Camera.fit(mesh.bounds)

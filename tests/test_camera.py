@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from aniso3d import InputError
-from aniso3d.render.camera import Camera, turntable
+from aniso3d.rendering.camera import Camera, turntable
 
 
 def test_view_matrix_maps_eye_to_origin_and_target_down_minus_z():

@@ -17,7 +17,6 @@ here.
 from __future__ import annotations
 
 import gc
-import importlib.util
 import resource
 from dataclasses import replace
 
@@ -26,8 +25,8 @@ import pytest
 
 from aniso3d import AnisoTexture, Mesh, PointCloud, build_texture, scenes, sphere_directions
 from aniso3d.build.texture import estimate_build_bytes
-from aniso3d.render.camera import Camera
-from aniso3d.render.lighting import Light, Lighting, shade_np
+from aniso3d.rendering.camera import Camera
+from aniso3d.rendering.lighting import Light, Lighting, shade_np
 
 EPS = np.finfo(np.float64).eps
 
@@ -460,11 +459,7 @@ def test_voxels_denser_than_one_are_kept_as_they_are(tmp_path):
 
 # ===================================================================== renderers
 
-METHODS = [
-    m
-    for m in ("mesh", "volume", "splat")
-    if m == "mesh" or importlib.util.find_spec(f"aniso3d.render.{m}") is not None
-]
+METHODS = ["mesh", "volume", "splat"]
 #: How a mesh is turned into what the volume and splat renderers draw here.
 BUILD = {"resolution": 32, "directions": 32}
 #: Draw options that make each method show a closed surface as opaque, so the
@@ -488,7 +483,7 @@ ONE_LIGHT = Lighting(
 def gpu():
     """Renderers with the default lights and with one light on black."""
     from aniso3d import ResourceError
-    from aniso3d.render.renderer import Renderer
+    from aniso3d.rendering.renderer import Renderer
 
     try:
         default = Renderer((SIZE, SIZE))
@@ -797,8 +792,8 @@ def test_splat_larger_than_the_screen(gpu, size, shape, quality):
     # wider than the largest point sprite go through the geometry path.
     # Then the same splat tilted 60 degrees and farther: its outline is the
     # perspective projection of its square to within a pixel along the edges.
-    from aniso3d.render.renderer import Renderer
-    from aniso3d.render.splat import shape_extent, tangent_frame
+    from aniso3d.rendering.renderer import Renderer
+    from aniso3d.rendering.splat import shape_extent, tangent_frame
 
     r = gpu["one"] if size == SIZE else Renderer((size, size), lighting=ONE_LIGHT, gl=gpu["one"].gl)
     try:
@@ -923,7 +918,7 @@ def test_renderers_release_every_gpu_object(gpu):
     # On a shared context every upload, framebuffer and per-method object a
     # Renderer made is gone after release(), for every method and option that
     # allocates something of its own (ssaa sizes, splat quality "high").
-    from aniso3d.render.renderer import Renderer
+    from aniso3d.rendering.renderer import Renderer
 
     gl = gpu["default"].gl
     before = gl.n_objects
@@ -947,7 +942,7 @@ def test_no_memory_growth_over_many_renderers_and_frames(gpu, method):  # gpu: s
     # the peak, so that growth anywhere is seen; 16 MiB is far below one
     # leaked context (~40 MiB on llvmpipe) or 150 leaked 64x64 framebuffers
     # plus their uploads.
-    from aniso3d.render.renderer import Renderer
+    from aniso3d.rendering.renderer import Renderer
 
     sphere = scenes.sphere(1.0, subdivisions=2)
     thing = sphere

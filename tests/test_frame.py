@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 import aniso3d
-from aniso3d.render.camera import Camera
-from aniso3d.render.frame import DrawStats, Frame, view_depth
-from aniso3d.render.select import select_voxels
-from aniso3d.render.splat import DEFAULT_PUSH, shape_extent
+from aniso3d.rendering.camera import Camera
+from aniso3d.rendering.frame import DrawStats, Frame, view_depth
+from aniso3d.rendering.select import select_voxels
+from aniso3d.rendering.splat import DEFAULT_PUSH, shape_extent
 
 SIZE = (96, 80)
 
@@ -28,7 +28,7 @@ def quad():
 @pytest.fixture(scope="module")
 def rf():
     from aniso3d import ResourceError
-    from aniso3d.render.renderer import Renderer
+    from aniso3d.rendering.renderer import Renderer
 
     try:
         renderer = Renderer(SIZE)

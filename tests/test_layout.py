@@ -24,7 +24,7 @@ STAGES = {
     "aniso3d.grid": 0,
     "aniso3d.metrics": 0,
     "aniso3d.build": 1,
-    "aniso3d.render": 2,
+    "aniso3d.rendering": 2,
     "aniso3d.bench": 3,
     "aniso3d.app": 4,
 }

@@ -11,8 +11,8 @@ from aniso3d.build.mesh import Mesh
 from aniso3d.build.pyramid import Pyramid, adaptive_points, as_pyramid, pyramid
 from aniso3d.build.texture import AnisoTexture, build_texture
 from aniso3d.errors import InputError
-from aniso3d.render.camera import Camera
-from aniso3d.render.select import select_points, select_voxels, selection_ranges
+from aniso3d.rendering.camera import Camera
+from aniso3d.rendering.select import select_points, select_voxels, selection_ranges
 
 K = 32
 

@@ -21,8 +21,8 @@ import aniso3d
 from aniso3d import InputError
 from aniso3d.build.pyramid import LodPoints, pyramid
 from aniso3d.metrics import psnr, ssim
-from aniso3d.render.camera import Camera, turntable
-from aniso3d.render.select import describe_stats
+from aniso3d.rendering.camera import Camera, turntable
+from aniso3d.rendering.select import describe_stats
 
 SIZE = (128, 128)
 

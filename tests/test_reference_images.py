@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 
 from aniso3d import scenes
-from aniso3d.render.camera import Camera
-from aniso3d.render.images import load_png, save_png
+from aniso3d.rendering.camera import Camera
+from aniso3d.rendering.images import load_png, save_png
 
 REFERENCE = Path(__file__).parent / "reference"
 SIZE = (64, 64)

@@ -14,13 +14,13 @@ import pytest
 
 import aniso3d
 from aniso3d import InputError
-from aniso3d.render.base import DrawOptions, MethodRenderer
-from aniso3d.render.camera import Camera
-from aniso3d.render.polygon import MeshOptions, MeshRenderer
-from aniso3d.render.renderer import BuildOptions
-from aniso3d.render.shader_source import preprocess, shader_dir
-from aniso3d.render.splat import SplatOptions, SplatRenderer, default_size_factor
-from aniso3d.render.volume import VolumeOptions, VolumeRenderer
+from aniso3d.rendering.base import DrawOptions, MethodRenderer
+from aniso3d.rendering.camera import Camera
+from aniso3d.rendering.polygon import MeshOptions, MeshRenderer
+from aniso3d.rendering.renderer import BuildOptions
+from aniso3d.rendering.shader_source import preprocess, shader_dir
+from aniso3d.rendering.splat import SplatOptions, SplatRenderer, default_size_factor
+from aniso3d.rendering.volume import VolumeOptions, VolumeRenderer
 
 RENDERERS = {"mesh": MeshRenderer, "volume": VolumeRenderer, "splat": SplatRenderer}
 OPTIONS = {"mesh": MeshOptions, "volume": VolumeOptions, "splat": SplatOptions}

@@ -14,10 +14,10 @@ import pytest
 
 import aniso3d
 from aniso3d import InputError, ResourceError
-from aniso3d.render.camera import Camera
-from aniso3d.render.context import GLContext
-from aniso3d.render.lighting import Lighting, shade_np
-from aniso3d.render.renderer import Renderer
+from aniso3d.rendering.camera import Camera
+from aniso3d.rendering.context import GLContext
+from aniso3d.rendering.lighting import Lighting, shade_np
+from aniso3d.rendering.renderer import Renderer
 
 pytestmark = pytest.mark.gpu
 
@@ -76,9 +76,9 @@ def x_display(monkeypatch):
 BACKEND_PROBE = """
 import json, sys, aniso3d
 from aniso3d import ResourceError
-from aniso3d.render.camera import Camera
-from aniso3d.render.context import GLContext
-from aniso3d.render.renderer import Renderer
+from aniso3d.rendering.camera import Camera
+from aniso3d.rendering.context import GLContext
+from aniso3d.rendering.renderer import Renderer
 try:
     gl = GLContext(sys.argv[1])
 except ResourceError as exc:

@@ -16,11 +16,11 @@ import pytest
 
 import aniso3d
 from aniso3d import InputError, PointCloud
-from aniso3d.render.camera import Camera
-from aniso3d.render.frame import FrameView
-from aniso3d.render.images import save_png
-from aniso3d.render.lighting import Lighting, shade_np
-from aniso3d.render.splat import (
+from aniso3d.rendering.camera import Camera
+from aniso3d.rendering.frame import FrameView
+from aniso3d.rendering.images import save_png
+from aniso3d.rendering.lighting import Lighting, shade_np
+from aniso3d.rendering.splat import (
     SHAPES,
     SplatRenderer,
     default_size_factor,

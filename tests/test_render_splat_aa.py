@@ -18,11 +18,11 @@ import pytest
 
 import aniso3d
 from aniso3d import PointCloud, ResourceError
-from aniso3d.render.camera import Camera
-from aniso3d.render.frame import FrameView
-from aniso3d.render.lighting import shade_np
-from aniso3d.render.renderer import Renderer
-from aniso3d.render.splat import SHAPES, SplatRenderer
+from aniso3d.rendering.camera import Camera
+from aniso3d.rendering.frame import FrameView
+from aniso3d.rendering.lighting import shade_np
+from aniso3d.rendering.renderer import Renderer
+from aniso3d.rendering.splat import SHAPES, SplatRenderer
 
 SIZE = (128, 128)
 

@@ -15,10 +15,10 @@ import aniso3d
 from aniso3d import InputError, ResourceError
 from aniso3d.build.clip import clip_to_grid, triangle_normals
 from aniso3d.build.mesh import concatenate
-from aniso3d.render.camera import Camera
-from aniso3d.render.frame import FrameView
-from aniso3d.render.images import save_png
-from aniso3d.render.volume import (
+from aniso3d.rendering.camera import Camera
+from aniso3d.rendering.frame import FrameView
+from aniso3d.rendering.images import save_png
+from aniso3d.rendering.volume import (
     BRICK,
     density_along,
     direction_weights,

@@ -15,7 +15,7 @@ import trimesh
 import aniso3d
 from aniso3d import InputError
 from aniso3d.build import scenes
-from aniso3d.render.camera import Camera
+from aniso3d.rendering.camera import Camera
 
 #: Small versions of the corpus scenes, for the tests that build or render all.
 SMALL = {

@@ -2,7 +2,7 @@
 
 import pytest
 
-from aniso3d.render.shader_source import ShaderSourceError, preprocess, read_shader, shader_dir
+from aniso3d.rendering.shader_source import ShaderSourceError, preprocess, read_shader, shader_dir
 
 
 def loader_from(files):

@@ -36,9 +36,9 @@ from aniso3d.app.viewer import (
     Orbit,
     step_resolution,
 )
-from aniso3d.render.context import GLContext
-from aniso3d.render.images import load_png
-from aniso3d.render.renderer import Renderer
+from aniso3d.rendering.context import GLContext
+from aniso3d.rendering.images import load_png
+from aniso3d.rendering.renderer import Renderer
 
 BOX = np.array([[-1.0, -2.0, -1.0], [1.0, 2.0, 1.0]])
 

@@ -15,13 +15,13 @@ from pathlib import Path
 import numpy as np
 
 from aniso3d.app.common import Progress, image_size, load_input, positive_float, positive_int
-from aniso3d.build.bounds import bounds_of
+from aniso3d.build.bounds import bounds_of, surface_sample
 from aniso3d.build.mesh import Mesh
 from aniso3d.build.points import PointCloud
-from aniso3d.build.texture import DEFAULT_DIRECTIONS, DEFAULT_RESOLUTION, AnisoTexture
+from aniso3d.build.texture import DEFAULT_DIRECTIONS, DEFAULT_RESOLUTION
 from aniso3d.errors import InputError
-from aniso3d.render.camera import Camera, turntable
-from aniso3d.render.select import describe_stats
+from aniso3d.rendering.camera import Camera, turntable
+from aniso3d.rendering.select import describe_stats
 
 PANEL_METHODS = ("mesh", "volume", "splat")
 
@@ -80,20 +80,6 @@ def _vec3(text: str) -> tuple[float, float, float]:
     return v  # type: ignore[return-value]
 
 
-def frame_points(thing, limit: int = 50_000) -> np.ndarray | None:
-    """Up to ``limit`` points of the thing's surface (every k-th), for a
-    framing tighter than its bounding box."""
-    if isinstance(thing, Mesh):
-        pts = thing.vertices
-    elif isinstance(thing, PointCloud):
-        pts = thing.positions
-    elif isinstance(thing, AnisoTexture):
-        pts = thing.entry_centroid
-    else:
-        return None
-    return pts[:: max(1, len(pts) // limit)]
-
-
 def camera_from_args(args, bounds: np.ndarray, points: np.ndarray | None = None) -> Camera:
     if args.camera_position is not None:
         target = args.camera_target or tuple(0.5 * (bounds[0] + bounds[1]))
@@ -113,9 +99,9 @@ def _lod(method: str, args) -> bool:
 
 
 def build_options(method: str, args):
-    """The :class:`~aniso3d.render.renderer.BuildOptions` of ``method`` from the
+    """The :class:`~aniso3d.rendering.renderer.BuildOptions` of ``method`` from the
     command line (how the input is converted; ``--lod``)."""
-    from aniso3d.render.renderer import BuildOptions
+    from aniso3d.rendering.renderer import BuildOptions
 
     return BuildOptions(resolution=args.resolution, directions=args.directions, placement=args.placement,
                         per_entry=args.points_per_entry, lod=_lod(method, args))  # fmt: skip
@@ -127,14 +113,14 @@ def draw_options(method: str, args):
     ``--lod``)."""
     pixel_error = args.pixel_error if _lod(method, args) else None
     if method == "splat":
-        from aniso3d.render.splat import SplatOptions
+        from aniso3d.rendering.splat import SplatOptions
 
         return SplatOptions(splat=args.splat, quality=args.quality, pixel_error=pixel_error)
     if method == "volume":
-        from aniso3d.render.volume import VolumeOptions
+        from aniso3d.rendering.volume import VolumeOptions
 
         return VolumeOptions(pixel_error=pixel_error)
-    from aniso3d.render.polygon import MeshOptions
+    from aniso3d.rendering.polygon import MeshOptions
 
     return MeshOptions()
 
@@ -154,8 +140,8 @@ def default_method(thing) -> str:
 
 def cmd_render(args) -> int:
     from aniso3d.files import refuse_overwriting_input
-    from aniso3d.render.images import save_png
-    from aniso3d.render.renderer import Renderer
+    from aniso3d.rendering.images import save_png
+    from aniso3d.rendering.renderer import Renderer
 
     out = Path(args.output)
     if out.suffix.lower() != ".png":
@@ -163,7 +149,7 @@ def cmd_render(args) -> int:
     refuse_overwriting_input(out, args.input)
     thing = load_input(args.input)
     bounds = bounds_of(thing)
-    camera = camera_from_args(args, bounds, frame_points(thing))
+    camera = camera_from_args(args, bounds, surface_sample(thing))
     with Renderer(args.size, backend=args.backend) as r:
         if args.method == "all":
             img, rows = figure(r, thing, camera, args)
@@ -187,7 +173,7 @@ def cmd_render(args) -> int:
 
 def figure(r, thing, camera: Camera, args) -> tuple[np.ndarray, list[str]]:
     """The three renderings side by side with labels, and one text row each."""
-    from aniso3d.render.images import label_panels
+    from aniso3d.rendering.images import label_panels
 
     panels, labels, rows = [], [], []
     truth = None
@@ -232,13 +218,13 @@ def figure(r, thing, camera: Camera, args) -> tuple[np.ndarray, list[str]]:
 
 
 def cmd_frames(args) -> int:
-    from aniso3d.render.renderer import Renderer
+    from aniso3d.rendering.renderer import Renderer
 
     folder = Path(args.output)
     if folder.exists() and not folder.is_dir():
         raise InputError(f"'{folder}' exists and is not a folder; 'frames' writes numbered PNGs into a folder")
     thing = load_input(args.input)
-    camera = camera_from_args(args, bounds_of(thing), frame_points(thing))
+    camera = camera_from_args(args, bounds_of(thing), surface_sample(thing))
     method = args.method or default_method(thing)
     cams = turntable(camera, args.frames, args.degrees)
     progress = Progress("frames", enabled=None if not args.quiet else False)

@@ -282,7 +282,7 @@ def make_cameras(bounds: np.ndarray, settings: Settings) -> list[CameraSpec]:
     ``h * H / (2 d tan(fov / 2))`` pixels at distance d, so the distance for a
     footprint f is the frame-filling one times ``footprint_at_fill / f``.
     """
-    from aniso3d.render.camera import Camera
+    from aniso3d.rendering.camera import Camera
 
     b = np.asarray(bounds, dtype=np.float64)
     h0 = float(np.max(b[1] - b[0])) / settings.baseline["resolution"]
@@ -446,7 +446,7 @@ COLUMNS = (
 
 def classify_failure(exc: BaseException, method: str) -> tuple[str, str]:
     """("skipped", why) when the renderer is not available, else ("failed", what)."""
-    if isinstance(exc, ModuleNotFoundError) and (exc.name or "").startswith("aniso3d.render."):
+    if isinstance(exc, ModuleNotFoundError) and (exc.name or "").startswith("aniso3d.rendering."):
         return "skipped", f"renderer '{method}' not available yet (module {exc.name} is missing)"
     if isinstance(exc, NotImplementedError):
         return "skipped", f"renderer '{method}' not implemented yet: {exc}".rstrip(": ")
@@ -514,7 +514,7 @@ def _downfilter_cpu(size: tuple[int, int], ssaa: int, repeats: int = 3) -> float
     filter's own CPU time varies by some 20% between runs."""
     if ssaa <= 1:
         return 0.0
-    from aniso3d.render.renderer import downsample as _downsample  # the very filter render() applies
+    from aniso3d.rendering.renderer import downsample as _downsample  # the very filter render() applies
 
     # Filled (not lazily zero-mapped) and flipped like the read-back frame.
     raw = np.full((size[1] * ssaa, size[0] * ssaa, 4), 128, np.uint8)[::-1]
@@ -558,8 +558,8 @@ def run_bench(
     """Measure every case of :func:`plan_cases` for ``mesh``; see the module docstring."""
     from aniso3d import metrics
     from aniso3d.build.texture import build_texture
-    from aniso3d.render.context import GLContext
-    from aniso3d.render.renderer import Renderer
+    from aniso3d.rendering.context import GLContext
+    from aniso3d.rendering.renderer import Renderer
 
     report = progress or (lambda fraction, stage: None)
     if with_flip is None:

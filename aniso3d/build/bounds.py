@@ -34,3 +34,17 @@ def bounds_of(thing: Mesh | AnisoTexture | PointCloud) -> np.ndarray:
     raise InputError(
         f"cannot draw a {type(thing).__name__}; give a mesh, a .a3d texture or a PLY point cloud"
     )
+
+
+def surface_sample(thing: Mesh | AnisoTexture | PointCloud, limit: int = 50_000) -> np.ndarray | None:
+    """Up to ``limit`` points of the thing's surface (every k-th), for a
+    framing tighter than its bounding box."""
+    if isinstance(thing, Mesh):
+        pts = thing.vertices
+    elif isinstance(thing, PointCloud):
+        pts = thing.positions
+    elif isinstance(thing, AnisoTexture):
+        pts = thing.entry_centroid
+    else:
+        return None
+    return pts[:: max(1, len(pts) // limit)]

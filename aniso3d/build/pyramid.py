@@ -19,7 +19,7 @@ A :class:`Pyramid` also keeps, per level, the parent/child links and the
 points of every voxel (made by :func:`aniso3d.build.texture.entry_points`, as
 ``to_points`` makes them, or :func:`adaptive_points` per entry), so that a
 view only has to choose voxels: that choice needs a camera and is
-:mod:`aniso3d.render.select`'s job.
+:mod:`aniso3d.rendering.select`'s job.
 """
 
 from __future__ import annotations
@@ -319,9 +319,9 @@ def adaptive_points(
 @dataclass(frozen=True, eq=False)
 class LodPoints:
     """A pyramid and the point options to draw it view-dependently with: what
-    :meth:`SplatRenderer.upload <aniso3d.render.splat.SplatRenderer.upload>`
+    :meth:`SplatRenderer.upload <aniso3d.rendering.splat.SplatRenderer.upload>`
     takes to upload every level's points once and draw, per frame, only
-    those :func:`~aniso3d.render.select.select_voxels` chooses.
+    those :func:`~aniso3d.rendering.select.select_voxels` chooses.
 
     ``per_entry`` is a whole number or ``"adaptive"``; ``placement`` and
     ``normal`` as for :meth:`AnisoTexture.to_points`.

@@ -11,7 +11,7 @@ Modules, in the order the data flows:
 - :mod:`~aniso3d.app.viewer.data`: the data each renderer needs for the
   current settings, the conversion jobs, and a cache for switching back.
 - :mod:`~aniso3d.app.viewer.scene`: uploads, and the scene drawn through the
-  :class:`~aniso3d.render.renderer.Renderer` into an offscreen framebuffer.
+  :class:`~aniso3d.rendering.renderer.Renderer` into an offscreen framebuffer.
 - :mod:`~aniso3d.app.viewer.overlay`: the text panels over the scene.
 - :mod:`~aniso3d.app.viewer.window`: the pyglet window (optional extra
   ``aniso3d[viewer]``, imported only when a window opens), its events and the

@@ -15,8 +15,8 @@ import numpy as np
 
 from aniso3d.app.viewer.scene import Frame
 from aniso3d.app.viewer.state import CONTROLS, METHOD_LABELS, METHODS, ViewState
-from aniso3d.render.context import GLContext
-from aniso3d.render.select import describe_stats
+from aniso3d.rendering.context import GLContext
+from aniso3d.rendering.select import describe_stats
 
 Color = tuple[int, int, int]
 #: Text lines: (text, RGB colour), top line first.

@@ -1,5 +1,5 @@
 """The viewer's scene image: the selected renderer's view of the current data,
-drawn through the :class:`~aniso3d.render.renderer.Renderer`'s per-method
+drawn through the :class:`~aniso3d.rendering.renderer.Renderer`'s per-method
 renderers into an offscreen framebuffer that the window shows with one quad.
 
 Data is uploaded once per method when it becomes ready and kept until newer
@@ -21,9 +21,9 @@ import numpy as np
 
 from aniso3d.app.viewer.data import Conversions, describe_data, describe_key
 from aniso3d.app.viewer.state import METHOD_LABELS, ViewState, settings_text
-from aniso3d.render.context import GLContext
-from aniso3d.render.frame import FrameView
-from aniso3d.render.renderer import Renderer
+from aniso3d.rendering.context import GLContext
+from aniso3d.rendering.frame import FrameView
+from aniso3d.rendering.renderer import Renderer
 
 
 @dataclass

@@ -19,7 +19,7 @@ from aniso3d.build.mesh import Mesh
 from aniso3d.build.points import PointCloud
 from aniso3d.build.texture import DEFAULT_DIRECTIONS, PLACEMENTS, AnisoTexture
 from aniso3d.errors import InputError
-from aniso3d.render.camera import Camera
+from aniso3d.rendering.camera import Camera
 
 METHODS = ("mesh", "volume", "splat")
 METHOD_LABELS = {"mesh": "polygons", "volume": "volume", "splat": "splats"}

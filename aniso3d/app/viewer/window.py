@@ -35,8 +35,8 @@ from aniso3d.app.viewer.scene import SceneView
 from aniso3d.app.viewer.state import KEYS, Settings, ViewState
 from aniso3d.errors import InputError, ResourceError
 from aniso3d.files import atomic_write
-from aniso3d.render.context import GLContext
-from aniso3d.render.renderer import Renderer
+from aniso3d.rendering.context import GLContext
+from aniso3d.rendering.renderer import Renderer
 
 HEADLESS_HINT = (
     "for images without a window use the headless CLI: 'aniso3d render [INPUT] -o out.png' "

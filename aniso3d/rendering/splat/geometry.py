@@ -9,8 +9,8 @@ import math
 import numpy as np
 
 from aniso3d.grid import tangent_frame
-from aniso3d.render.frame import FrameView
-from aniso3d.render.splat.options import DEFAULT_ASPECT, default_size_factor, shape_extent
+from aniso3d.rendering.frame import FrameView
+from aniso3d.rendering.splat.options import DEFAULT_ASPECT, default_size_factor, shape_extent
 
 
 def splat_coverage_np(

@@ -7,7 +7,7 @@ Each point is a small flat shape in its tangent plane, sized from its area:
 - ``ellipse``: the disc stretched by ``sqrt(aspect)`` along the point's first
   tangent axis and shrunk by as much along the second (same area). A
   :class:`~aniso3d.build.points.PointCloud` carries no anisotropy, so the axis is a
-  fixed function of the normal (:func:`~aniso3d.render.splat.geometry.tangent_frame`,
+  fixed function of the normal (:func:`~aniso3d.rendering.splat.geometry.tangent_frame`,
   the convention ``texture.to_points`` spreads points with) and ``aspect`` is an
   option; the ellipse is a well-defined shape, not a view-dependent stretch.
 
@@ -23,7 +23,7 @@ import math
 from dataclasses import dataclass
 from typing import ClassVar
 
-from aniso3d.render.base import DrawOptions, choice, number
+from aniso3d.rendering.base import DrawOptions, choice, number
 
 SHAPES = ("square", "disc", "ellipse")
 QUALITIES = ("fast", "high", "blend")
@@ -77,7 +77,7 @@ def shape_extent(
 
 @dataclass(frozen=True)
 class SplatOptions(DrawOptions):
-    """How splats are drawn (see :mod:`aniso3d.render.splat`).
+    """How splats are drawn (see :mod:`aniso3d.rendering.splat`).
 
     Attributes:
         splat: the shape, one of :data:`SHAPES`.

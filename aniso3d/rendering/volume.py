@@ -73,11 +73,11 @@ from aniso3d.build.pyramid import Pyramid
 from aniso3d.build.texture import AnisoTexture
 from aniso3d.errors import InputError, ResourceError
 from aniso3d.grid import cell_keys
-from aniso3d.render.base import DrawOptions, number, option_parser
-from aniso3d.render.context import GLContext
-from aniso3d.render.frame import DrawStats, FrameView
-from aniso3d.render.lighting import Lighting, shade_np
-from aniso3d.render.select import volume_level
+from aniso3d.rendering.base import DrawOptions, number, option_parser
+from aniso3d.rendering.context import GLContext
+from aniso3d.rendering.frame import DrawStats, FrameView
+from aniso3d.rendering.lighting import Lighting, shade_np
+from aniso3d.rendering.select import volume_level
 
 #: Brick edge in voxels of the two-level index.
 BRICK = 8
@@ -425,7 +425,7 @@ class GPUVolume:
 class GPULodVolume:
     """Every level of a texture pyramid uploaded once (``levels[l]``, a
     :class:`GPUVolume` each); a frame ray-marches the one level
-    :func:`~aniso3d.render.select.volume_level` picks. ``bounds`` covers every level's
+    :func:`~aniso3d.rendering.select.volume_level` picks. ``bounds`` covers every level's
     grid, so the clip range does not depend on the level drawn.
     ``last_stats`` is the last frame's choice."""
 
@@ -496,7 +496,7 @@ class VolumeRenderer:
         }
         self.prog = gl.program("volume.vert", "volume.frag", defines=defines)
         self.vao = gl.track(ctx.vertex_array(self.prog, []))
-        #: The last pyramid frame's level choice (see :func:`~aniso3d.render.select.volume_level`).
+        #: The last pyramid frame's level choice (see :func:`~aniso3d.rendering.select.volume_level`).
         self.last_lod_stats: dict | None = None
 
     def upload(self, texture: AnisoTexture | Pyramid) -> GPUVolume | GPULodVolume:
@@ -558,7 +558,7 @@ class VolumeRenderer:
 
         Options: ``options`` (:class:`VolumeOptions`) or the same as keywords.
         A pyramid upload (:class:`GPULodVolume`) draws the level
-        :func:`~aniso3d.render.select.volume_level` picks for ``pixel_error``
+        :func:`~aniso3d.rendering.select.volume_level` picks for ``pixel_error``
         (framebuffer pixels, default 1).
         """
         opts = VolumeOptions.resolve(options, values)

@@ -14,10 +14,10 @@ from __future__ import annotations
 
 import moderngl
 
-from aniso3d.render.frame import FrameView
-from aniso3d.render.splat.buffers import ATTRIB_PER_ROW, GPUPoints
-from aniso3d.render.splat.options import SplatOptions
-from aniso3d.render.splat.pipeline import SplatPipeline, Targets
+from aniso3d.rendering.frame import FrameView
+from aniso3d.rendering.splat.buffers import ATTRIB_PER_ROW, GPUPoints
+from aniso3d.rendering.splat.options import SplatOptions
+from aniso3d.rendering.splat.pipeline import SplatPipeline, Targets
 
 
 class FastPass:

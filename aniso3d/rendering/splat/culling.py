@@ -9,8 +9,8 @@ import math
 
 import numpy as np
 
-from aniso3d.render.frame import FrameView
-from aniso3d.render.splat.buffers import GPULodPoints, GPUPoints
+from aniso3d.rendering.frame import FrameView
+from aniso3d.rendering.splat.buffers import GPULodPoints, GPUPoints
 
 #: (8, 3) selectors of a box's corners.
 _CORNERS = np.array([[i & 1, i & 2, i & 4] for i in range(8)], bool)

@@ -1,6 +1,6 @@
 """:class:`SplatRenderer`: uploads points once and draws them with one of the
-three qualities (:mod:`~aniso3d.render.splat.fast`,
-:mod:`~aniso3d.render.splat.coverage`), from all points or, for a pyramid
+three qualities (:mod:`~aniso3d.rendering.splat.fast`,
+:mod:`~aniso3d.rendering.splat.coverage`), from all points or, for a pyramid
 upload, from this frame's level-of-detail selection."""
 
 from __future__ import annotations
@@ -10,15 +10,15 @@ import moderngl
 from aniso3d.build.points import PointCloud
 from aniso3d.build.pyramid import LodPoints
 from aniso3d.errors import InputError
-from aniso3d.render.base import option_parser
-from aniso3d.render.context import GLContext
-from aniso3d.render.frame import DrawStats, FrameView
-from aniso3d.render.splat import buffers, culling
-from aniso3d.render.splat.buffers import GPULodPoints, GPUPoints
-from aniso3d.render.splat.coverage import BlendPass, HighPass
-from aniso3d.render.splat.fast import FastPass
-from aniso3d.render.splat.options import SplatOptions
-from aniso3d.render.splat.pipeline import SplatPipeline, reach
+from aniso3d.rendering.base import option_parser
+from aniso3d.rendering.context import GLContext
+from aniso3d.rendering.frame import DrawStats, FrameView
+from aniso3d.rendering.splat import buffers, culling
+from aniso3d.rendering.splat.buffers import GPULodPoints, GPUPoints
+from aniso3d.rendering.splat.coverage import BlendPass, HighPass
+from aniso3d.rendering.splat.fast import FastPass
+from aniso3d.rendering.splat.options import SplatOptions
+from aniso3d.rendering.splat.pipeline import SplatPipeline, reach
 
 
 class SplatRenderer:
@@ -60,14 +60,14 @@ class SplatRenderer:
     # -------------------------------------------------------------- upload
 
     def upload(self, cloud: PointCloud | LodPoints) -> GPUPoints:
-        """Upload ``cloud`` once (:func:`~aniso3d.render.splat.buffers.upload_points`);
+        """Upload ``cloud`` once (:func:`~aniso3d.rendering.splat.buffers.upload_points`);
         a :class:`~aniso3d.build.pyramid.LodPoints` uploads every level of its
         pyramid (:class:`GPULodPoints`), and :meth:`draw` then selects per frame."""
         return buffers.upload_points(self.gl, cloud)
 
     def select(self, handle: GPULodPoints, view: FrameView, pixel_error: float = 1.0) -> dict:
         """This frame's points of a pyramid upload
-        (:func:`~aniso3d.render.splat.buffers.select`); the statistics are
+        (:func:`~aniso3d.rendering.splat.buffers.select`); the statistics are
         also kept as :attr:`last_lod_stats`."""
         stats = buffers.select(handle, view, pixel_error)
         self.last_lod_stats = stats
@@ -87,13 +87,13 @@ class SplatRenderer:
     ) -> list[tuple[int, int]]:
         """(first, count) ranges of points that may hold a splat wider than
         ``limit`` pixels (default :attr:`max_sprite`) in this frame
-        (:func:`~aniso3d.render.splat.culling.large_blocks`)."""
+        (:func:`~aniso3d.rendering.splat.culling.large_blocks`)."""
         return self.pipe.large_blocks(handle, view, opts, limit)
 
     def screen_box(
         self, handle: GPUPoints, view: FrameView, opts: SplatOptions
     ) -> tuple[int, int, int, int] | None:
-        """The pixels holding every splat (:func:`~aniso3d.render.splat.culling.screen_box`)."""
+        """The pixels holding every splat (:func:`~aniso3d.rendering.splat.culling.screen_box`)."""
         return culling.screen_box(handle, view, opts.extent, reach(opts))
 
     def draw(

@@ -14,7 +14,7 @@ The cache is bounded by a number of entries and by bytes (each value's
 ``nbytes``), least recently used first out; the newest entry always stays.
 An entry that leaves (evicted, discarded, its source collected, or cleared)
 is passed to its ``release`` function, e.g. a renderer's ``release(handle)``
-that frees GPU objects through the :class:`~aniso3d.render.context.GLContext`.
+that frees GPU objects through the :class:`~aniso3d.rendering.context.GLContext`.
 Releases of entries whose source was collected are deferred to the next call
 on the cache (a garbage collection may run in the middle of a draw), and
 :meth:`Cache.clear` runs any still pending.

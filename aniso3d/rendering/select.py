@@ -23,7 +23,7 @@ from aniso3d.build.points import PointCloud
 from aniso3d.build.pyramid import as_pyramid
 from aniso3d.errors import InputError
 from aniso3d.grid import ranges
-from aniso3d.render.camera import Camera
+from aniso3d.rendering.camera import Camera
 
 # -------------------------------------------------------------------- selection
 

@@ -10,7 +10,7 @@ the shape, and writes the true depth, so splats foreshorten and occlude like
 polygons. Most splats are point sprites (one vertex, the cheapest primitive
 a software rasteriser has); splats wider than the largest sprite (255 px on
 llvmpipe) go through a geometry shader instead, for the blocks of points
-where the CPU finds that possible (:func:`~aniso3d.render.splat.culling.large_blocks`).
+where the CPU finds that possible (:func:`~aniso3d.rendering.splat.culling.large_blocks`).
 """
 
 from __future__ import annotations
@@ -22,12 +22,12 @@ import moderngl
 import numpy as np
 
 from aniso3d.errors import ResourceError
-from aniso3d.render.context import GLContext
-from aniso3d.render.frame import FrameView
-from aniso3d.render.splat.buffers import ATTRIBUTES, GPULodPoints, GPUPoints
-from aniso3d.render.splat.culling import large_blocks
-from aniso3d.render.splat.options import SplatOptions
-from aniso3d.render.splat.params import (
+from aniso3d.rendering.context import GLContext
+from aniso3d.rendering.frame import FrameView
+from aniso3d.rendering.splat.buffers import ATTRIBUTES, GPULodPoints, GPUPoints
+from aniso3d.rendering.splat.culling import large_blocks
+from aniso3d.rendering.splat.options import SplatOptions
+from aniso3d.rendering.splat.params import (
     AA_DEEP,
     AA_FILTER,
     AA_GROWTH,
@@ -44,7 +44,7 @@ class Targets:
     texture (geometry pass of "fast", visibility pass of "high" and "blend")
     and its framebuffer; the point ids (R32UI, "fast"), the accumulation
     texture ("blend") and the layers of "high" (``slabs``:
-    :data:`~aniso3d.render.splat.params.AA_SLABS` RGBA textures and one for
+    :data:`~aniso3d.rendering.splat.params.AA_SLABS` RGBA textures and one for
     the deep layers' resolved coverage), each made by its pass."""
 
     depth: moderngl.Texture

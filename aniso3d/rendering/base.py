@@ -1,14 +1,14 @@
 """The one interface of the three renderers: upload once, draw many frames.
 
-A renderer (:class:`~aniso3d.render.polygon.MeshRenderer`,
-:class:`~aniso3d.render.volume.VolumeRenderer`,
-:class:`~aniso3d.render.splat.SplatRenderer`) is handed a
-:class:`~aniso3d.render.context.GLContext` and
+A renderer (:class:`~aniso3d.rendering.polygon.MeshRenderer`,
+:class:`~aniso3d.rendering.volume.VolumeRenderer`,
+:class:`~aniso3d.rendering.splat.SplatRenderer`) is handed a
+:class:`~aniso3d.rendering.context.GLContext` and
 
 - ``upload(data)`` puts what it draws on the GPU once and returns a handle
   (:class:`Uploaded`: at least its world ``bounds`` and ``nbytes``);
 - ``draw(handle, view, fbo, options)`` draws one frame of it into the bound
-  framebuffer and returns :class:`~aniso3d.render.frame.DrawStats`;
+  framebuffer and returns :class:`~aniso3d.rendering.frame.DrawStats`;
 - ``release(handle)`` frees an upload, ``release_all()`` the renderer's own
   GPU objects.
 
@@ -29,8 +29,8 @@ from typing import Any, ClassVar, Protocol, TypeVar, runtime_checkable
 import numpy as np
 
 from aniso3d.errors import InputError
-from aniso3d.render.context import GLContext
-from aniso3d.render.frame import DrawStats, FrameView
+from aniso3d.rendering.context import GLContext
+from aniso3d.rendering.frame import DrawStats, FrameView
 
 O = TypeVar("O", bound="DrawOptions")  # noqa: E741
 

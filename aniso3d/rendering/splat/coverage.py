@@ -12,12 +12,12 @@ the pixels sum to exactly that area wherever it lies: no splat takes a whole
 pixel, as in "fast", and none vanishes. A resolved splat (a few pixels and
 more) is its exact perspective shape with the size factor, each pair of
 edges filtered across its distance in pixels; between the two regimes
-(:data:`~aniso3d.render.splat.params.AA_REGIME`) the two blend. Three passes:
+(:data:`~aniso3d.rendering.splat.params.AA_REGIME`) the two blend. Three passes:
 visibility (as "blend", each pixel's nearest pushed depth, kept as a linear
 depth); accumulation of ``(colour c, c)`` into
-:data:`~aniso3d.render.splat.params.AA_SLABS` depth layers behind that depth
+:data:`~aniso3d.rendering.splat.params.AA_SLABS` depth layers behind that depth
 (the first holds the visible surface, the others are thicker and thicker by
-:data:`~aniso3d.render.splat.params.AA_GROWTH`, and a fragment is shared
+:data:`~aniso3d.rendering.splat.params.AA_GROWTH`, and a fragment is shared
 between the two it lies between); and compositing front to back, like the
 volume renderer's: the visible surface's splats tile it (coverage added, at
 most what is left of the pixel), the splats of a deep layer hide each other
@@ -44,11 +44,11 @@ from __future__ import annotations
 
 import moderngl
 
-from aniso3d.render.frame import FrameView
-from aniso3d.render.splat.buffers import GPUPoints
-from aniso3d.render.splat.options import SplatOptions
-from aniso3d.render.splat.params import AA_DEEP, AA_DTYPE, AA_SLABS, ACCUM_DTYPE
-from aniso3d.render.splat.pipeline import SplatPipeline, Targets
+from aniso3d.rendering.frame import FrameView
+from aniso3d.rendering.splat.buffers import GPUPoints
+from aniso3d.rendering.splat.options import SplatOptions
+from aniso3d.rendering.splat.params import AA_DEEP, AA_DTYPE, AA_SLABS, ACCUM_DTYPE
+from aniso3d.rendering.splat.pipeline import SplatPipeline, Targets
 
 
 def visible_then_accumulate(

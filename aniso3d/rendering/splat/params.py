@@ -1,6 +1,6 @@
 """Measured parameters of the blended draw passes: the accumulation texture of
 ``quality="blend"`` and the layers, pixel filter and regimes of
-``quality="high"`` (see :mod:`aniso3d.render.splat.coverage`)."""
+``quality="high"`` (see :mod:`aniso3d.rendering.splat.coverage`)."""
 
 from __future__ import annotations
 

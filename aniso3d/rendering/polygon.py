@@ -1,6 +1,6 @@
 """Renderer (a): the polygon model itself, per-face Phong, the ground truth.
 
-Supersampling is the frame's business (:class:`~aniso3d.render.renderer.Renderer`
+Supersampling is the frame's business (:class:`~aniso3d.rendering.renderer.Renderer`
 draws at ``ssaa`` times the size and box-filters); this module only draws.
 """
 
@@ -14,9 +14,9 @@ import numpy as np
 
 from aniso3d.build.mesh import Mesh
 from aniso3d.errors import InputError
-from aniso3d.render.base import DrawOptions, option_parser
-from aniso3d.render.context import GLContext
-from aniso3d.render.frame import DrawStats, FrameView
+from aniso3d.rendering.base import DrawOptions, option_parser
+from aniso3d.rendering.context import GLContext
+from aniso3d.rendering.frame import DrawStats, FrameView
 
 
 @dataclass(frozen=True)

@@ -9,8 +9,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from aniso3d.render.camera import Camera
-from aniso3d.render.lighting import Lighting
+from aniso3d.rendering.camera import Camera
+from aniso3d.rendering.lighting import Lighting
 
 
 @dataclass(frozen=True)
@@ -72,8 +72,8 @@ class DrawStats:
             uploads: the splats' levels with points selected, the volume's one
             level); () otherwise.
         lod: the level-of-detail selection's statistics (see
-            :meth:`SplatRenderer.select <aniso3d.render.splat.SplatRenderer.select>`
-            and :func:`~aniso3d.render.select.volume_level`), None otherwise.
+            :meth:`SplatRenderer.select <aniso3d.rendering.splat.SplatRenderer.select>`
+            and :func:`~aniso3d.rendering.select.volume_level`), None otherwise.
     """
 
     drawn: int
@@ -84,7 +84,7 @@ class DrawStats:
 
 @dataclass(frozen=True, eq=False)
 class Frame:
-    """One drawn frame (:meth:`Renderer.render_frame <aniso3d.render.renderer.Renderer.render_frame>`).
+    """One drawn frame (:meth:`Renderer.render_frame <aniso3d.rendering.renderer.Renderer.render_frame>`).
 
     Attributes:
         color: (H, W, 3 or 4) uint8, row 0 at the top: what ``Renderer.render``

@@ -16,7 +16,7 @@ from typing import Any
 import moderngl
 
 from aniso3d.errors import ResourceError
-from aniso3d.render.shader_source import preprocess
+from aniso3d.rendering.shader_source import preprocess
 
 log = logging.getLogger("aniso3d")
 

@@ -20,10 +20,10 @@ from aniso3d.build.points import PointCloud
 from aniso3d.build.pyramid import LodPoints
 from aniso3d.errors import InputError, ResourceError
 from aniso3d.grid import ranges
-from aniso3d.render.context import GLContext
-from aniso3d.render.frame import FrameView
-from aniso3d.render.select import select_voxels
-from aniso3d.render.splat.geometry import morton_order
+from aniso3d.rendering.context import GLContext
+from aniso3d.rendering.frame import FrameView
+from aniso3d.rendering.select import select_voxels
+from aniso3d.rendering.splat.geometry import morton_order
 
 #: Points per block of the CPU's large-splat test (points are Morton-sorted, so
 #: a block is a compact piece of the cloud).
@@ -70,7 +70,7 @@ class GPULodPoints(GPUPoints):
     uploaded once, one after the other in one buffer (finest level first),
     each level's voxels in Morton order of their grid cells with every voxel's
     points contiguous. A frame draws only the voxels
-    :func:`~aniso3d.render.select.select_voxels` chooses, through an index buffer
+    :func:`~aniso3d.rendering.select.select_voxels` chooses, through an index buffer
     rewritten per frame (4 bytes per point drawn), in ascending order.
 
     ``bounds`` (and so the clip range) covers every level's points, whatever a
@@ -213,7 +213,7 @@ def upload_lod(gl: GLContext, lod: LodPoints) -> GPULodPoints:
 
 
 def select(handle: GPULodPoints, view: FrameView, pixel_error: float = 1.0) -> dict:
-    """This frame's points of a pyramid upload: :func:`~aniso3d.render.select.select_voxels`
+    """This frame's points of a pyramid upload: :func:`~aniso3d.rendering.select.select_voxels`
     for the view's camera and framebuffer size (clip range ``view.near``
     to ``view.far``), their buffer indices written to the index buffer.
     Returns (and keeps as ``handle.last_stats``) the frame's statistics: ``points`` drawn,

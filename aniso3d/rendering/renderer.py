@@ -2,7 +2,7 @@
 
 ``Renderer.render(thing, camera, method=...)`` draws a mesh, texture or point
 cloud and returns an (H, W, 3) uint8 image (row 0 at the top);
-``Renderer.render_frame`` returns a :class:`~aniso3d.render.frame.Frame` with
+``Renderer.render_frame`` returns a :class:`~aniso3d.rendering.frame.Frame` with
 the same image, its depth and what was drawn.
 
 Three kinds of options, each a frozen dataclass checked on construction,
@@ -12,13 +12,13 @@ given as dataclasses or as keywords:
   (mesh -> texture -> points) and what is uploaded (``lod``: the texture's
   pyramid, :mod:`aniso3d.build.pyramid`);
 - draw options (``options=``): the method renderer's own ``Options``
-  (:class:`~aniso3d.render.splat.SplatOptions`,
-  :class:`~aniso3d.render.volume.VolumeOptions`,
-  :class:`~aniso3d.render.polygon.MeshOptions`);
+  (:class:`~aniso3d.rendering.splat.SplatOptions`,
+  :class:`~aniso3d.rendering.volume.VolumeOptions`,
+  :class:`~aniso3d.rendering.polygon.MeshOptions`);
 - frame options, arguments of ``render``: ``ssaa``, ``alpha``, ``size``.
 
 Conversions and GPU uploads are made once per thing and options and kept in
-two bounded caches (:class:`~aniso3d.render.cache.Cache`: host memory and GPU
+two bounded caches (:class:`~aniso3d.rendering.cache.Cache`: host memory and GPU
 memory), which hold the things weakly: a thing that is garbage-collected takes
 what was made from it along.
 
@@ -54,12 +54,12 @@ from aniso3d.build.texture import (
     build_texture,
 )
 from aniso3d.errors import InputError
-from aniso3d.render.base import DrawOptions, MethodRenderer, choice, unknown_names
-from aniso3d.render.cache import Cache
-from aniso3d.render.camera import Camera
-from aniso3d.render.context import GLContext
-from aniso3d.render.frame import Frame, FrameView, view_depth
-from aniso3d.render.lighting import Lighting
+from aniso3d.rendering.base import DrawOptions, MethodRenderer, choice, unknown_names
+from aniso3d.rendering.cache import Cache
+from aniso3d.rendering.camera import Camera
+from aniso3d.rendering.context import GLContext
+from aniso3d.rendering.frame import Frame, FrameView, view_depth
+from aniso3d.rendering.lighting import Lighting
 
 METHODS = ("mesh", "volume", "splat")
 #: Default bounds of each of a renderer's two caches.
@@ -202,11 +202,11 @@ class Renderer:
         impl = self._impl.get(method)
         if impl is None:
             if method == "mesh":
-                from aniso3d.render.polygon import MeshRenderer as cls
+                from aniso3d.rendering.polygon import MeshRenderer as cls
             elif method == "splat":
-                from aniso3d.render.splat import SplatRenderer as cls
+                from aniso3d.rendering.splat import SplatRenderer as cls
             else:
-                from aniso3d.render.volume import VolumeRenderer as cls
+                from aniso3d.rendering.volume import VolumeRenderer as cls
             impl = self._impl[method] = cls(self.gl)
         return impl
 
@@ -349,7 +349,7 @@ class Renderer:
         **values,
     ) -> Frame:
         """:meth:`render`, with the frame's depth and statistics: a
-        :class:`~aniso3d.render.frame.Frame` (colour as :meth:`render` returns
+        :class:`~aniso3d.rendering.frame.Frame` (colour as :meth:`render` returns
         it; depth the view-axis distance, +inf on the background)."""
         img, stats, fbo, view = self._draw(thing, camera, method, ssaa, alpha, size, build, options, values)
         fw, fh = view.size
@@ -429,7 +429,7 @@ class Renderer:
         **options,
     ) -> list[Path]:
         """Render one frame per camera to numbered PNG files in ``folder``."""
-        from aniso3d.render.images import save_png
+        from aniso3d.rendering.images import save_png
 
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
