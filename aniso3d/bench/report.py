@@ -484,50 +484,63 @@ def section_timing(v: _View) -> list[str]:
     return L + _table(["renderer", "rows", "median frame ms", "median spread"], body)
 
 
-def section_recommendation(v: _View) -> list[str]:
-    """The renderer per distance and each setting's value, both computed from
-    the rows, and which of the code's defaults the data would change."""
-    err = v.err
-    L = ["## Recommended configuration", ""]
+def _recommend_renderers(v: _View) -> list[str]:
+    """Per grid camera: the most accurate renderer, the one for accuracy and the one for speed."""
     by_distance = renderer_by_distance(v.rows)
-    if by_distance:
-        L += [
-            f"**Renderer by distance** (grid block, CPU milliseconds per frame): per camera, the most "
-            f"accurate renderer; the cheapest whose {err} is within 10% of it (the recommendation for "
-            "accuracy); and the cheapest that is more accurate than one-sample polygons (for speed).",
-            "",
-        ]
+    if not by_distance:
+        return []
 
-        def cell(r: dict | None, bold: bool = False) -> str:
-            if r is None:
-                return "-"
-            name = f"**{r['renderer']}**" if bold else r["renderer"]
-            return f"{name} ({_fmt(r['error'], '.4f')}, {_fmt(cost(r), '.0f', 1e3)} ms)"
+    def cell(r: dict | None, bold: bool = False) -> str:
+        if r is None:
+            return "-"
+        name = f"**{r['renderer']}**" if bold else r["renderer"]
+        return f"{name} ({_fmt(r['error'], '.4f')}, {_fmt(cost(r), '.0f', 1e3)} ms)"
 
-        body = [[f"`{d['camera']}`", f"{d['voxel_px']:.2f}", cell(d["best"]), cell(d["pick"], True),
-                 cell(d["beats_1spp"], True)] for d in by_distance]  # fmt: skip
-        L += _table(["camera", "voxel px", f"most accurate ({err}, CPU)", "for accuracy", "for speed"], body)
-    rec = recommend(v.rows)
-    L += [
-        f"**Settings**, per renderer from the one-axis blocks: the value with the lowest mean {err} over "
-        "the near and far cameras, unless a value within 1% of that error needs at least 5% fewer bytes "
-        "or 10% less CPU time per frame (CPU time rather than wall time, as it hardly depends on other "
-        "load).",
+    body = [[f"`{d['camera']}`", f"{d['voxel_px']:.2f}", cell(d["best"]), cell(d["pick"], True),
+             cell(d["beats_1spp"], True)] for d in by_distance]  # fmt: skip
+    return [
+        f"**Renderer by distance** (grid block, CPU milliseconds per frame): per camera, the most accurate "
+        f"renderer; the cheapest whose {v.err} is within 10% of it (the recommendation for accuracy); and "
+        "the cheapest that is more accurate than one-sample polygons (for speed).",
         "",
-    ]
+    ] + _table(["camera", "voxel px", f"most accurate ({v.err}, CPU)", "for accuracy", "for speed"], body)
+
+
+def _best_per_camera(v: _View, rec: dict) -> str:
+    """' (best at `fill`: 256, at `1px`: 128)' when the cameras disagree, else ''."""
+    field = AXES[rec["axis"]]
+    sel = [r for r in measured(v.rows) if in_block(r, rec["axis"]) and r["method"] == rec["renderer"]]
+    best = {}
+    for cam in dict.fromkeys(r["camera"] for r in sel):
+        best[cam] = min((r for r in sel if r["camera"] == cam), key=lambda r: r["error"])[field]
+    if len(set(best.values())) < 2:
+        return ""
+    return " (best at " + ", at ".join(f"`{c}`: {x}" for c, x in best.items()) + ")"
+
+
+def _recommend_settings(v: _View) -> list[str]:
+    """Each setting's recommended value, and how that compares with the baseline."""
+    err, base = v.err, v.meta["settings"]["baseline"]
+    rec = recommend(v.rows)
+    if not rec:
+        return []
     body = []
     for r in rec:
         values = "; ".join(f"{k}: {_fmt(e, '.4f')}, {_fmt(t, '.0f', 1e3)} ms" for k, (e, t, _) in r["table"].items())
         body.append([r["axis"], r["renderer"], f"**{r['value']}**", str(r["best"]), values, r["why"]])
-    L += _table(["setting", "renderer", "recommended", "most accurate", f"mean {err}, CPU per frame", "why"], body)
-    base = v.meta["settings"]["baseline"]
-    change, keep = default_changes(rec, base)
+    L = [
+        f"**Settings**, per renderer from the one-axis blocks: the value with the lowest mean {err} over the "
+        "near and far cameras, unless a value within 1% of that error needs at least 5% fewer bytes or 10% "
+        "less CPU time per frame (CPU time rather than wall time, as it hardly depends on other load).",
+        "",
+    ] + _table(["setting", "renderer", "recommended", "most accurate", f"mean {err}, CPU per frame", "why"], body)
 
     def entry(r: dict) -> str:
         e_p, e_b = r["table"][r["value"]][0], r["table"].get(base[r["axis"]], (math.nan,))[0]
         return (f"{r['axis']} for {r['renderer']}: {base[r['axis']]} -> {r['value']} "
-                f"({err} {_fmt(e_b, '.4f')} -> {_fmt(e_p, '.4f')})")  # fmt: skip
+                f"(mean {err} {_fmt(e_b, '.4f')} -> {_fmt(e_p, '.4f')}){_best_per_camera(v, r)}")  # fmt: skip
 
+    change, keep = default_changes(rec, base)
     if change:
         L += ["Against this run's baseline, the data says to change: " + "; ".join(entry(r) for r in change)
               + ". The bench does not change defaults by itself.", ""]  # fmt: skip
@@ -535,9 +548,15 @@ def section_recommendation(v: _View) -> list[str]:
         L += ["Recommended values that differ from the baseline but do not beat it by more than 1% in "
               "error, 5% in bytes or 10% in CPU time, so the baseline may stay: "
               + "; ".join(entry(r) for r in keep) + ".", ""]  # fmt: skip
-    if rec and not change:
+    if not change:
         L += ["The data gives no reason to change any of this run's baseline settings.", ""]
     return L
+
+
+def section_recommendation(v: _View) -> list[str]:
+    """The renderer per distance and each setting's value, both computed from
+    the rows, and which of the baseline's values the data would change."""
+    return ["## Recommended configuration", ""] + _recommend_renderers(v) + _recommend_settings(v)
 
 
 def section_not_measured(v: _View) -> list[str]:
