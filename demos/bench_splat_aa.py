@@ -15,7 +15,7 @@ view) for s = 1, 2.3, 4.6, 9 and 18, by:
 
 Errors against the polygons at 8x8 samples per pixel (same camera, lights and
 size), inside the pixel box the tree's bounds project to plus 8 px
-(:func:`aniso3d.bench.cli_tmp.crop_box`): PSNR and SSIM (aniso3d.metrics, on the 8-bit
+(:func:`aniso3d.bench.cameras.crop_box`): PSNR and SSIM (aniso3d.metrics, on the 8-bit
 sRGB-encoded values), FLIP when ``flip-evaluator`` is installed, and
 coverage, the image's summed alpha over the truth's in the same box. Frame
 time: the median of ``--frames`` frames after one warm-up, the configurations
@@ -44,7 +44,7 @@ from pathlib import Path
 import numpy as np
 
 import aniso3d
-from aniso3d.bench.cli_tmp import crop_box
+from aniso3d.bench.cameras import crop_box
 from aniso3d.metrics import flip, flip_available, psnr, ssim
 from aniso3d.rendering.camera import Camera
 from aniso3d.rendering.images import save_png

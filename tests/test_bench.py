@@ -6,14 +6,15 @@ from __future__ import annotations
 import csv
 import json
 import math
+import os
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from aniso3d import scenes
+from aniso3d import bench, scenes
 from aniso3d.app import cli
-from aniso3d.bench import cli_tmp as bench
+from aniso3d.bench import analyse, plots, run
 from aniso3d.rendering.camera import Camera
 
 # ------------------------------------------------------------ without a GPU
@@ -130,35 +131,104 @@ def test_recommend_prefers_cheaper_values_only_within_tolerance():
     assert ("placement", "volume") not in rec
 
 
+def test_default_changes_keep_the_baseline_within_tolerance():
+    rows = [
+        # quality: high is the baseline; fast is far worse, so high stays recommended.
+        _row("splat", "quality", "high", 0.020, 0.15, 5),
+        _row("splat", "quality", "fast", 0.085, 0.04, 5),
+        # splat shape: ellipse is the most accurate by 0.5%, no cheaper: a tie, keep disc.
+        _row("splat", "splat", "disc", 0.0202, 0.15, 5),
+        _row("splat", "splat", "ellipse", 0.0201, 0.16, 5),
+        # resolution: 128 is 30% more accurate than the baseline 64: change.
+        _row("volume", "resolution", 64, 0.0346, 0.05, 10),
+        _row("volume", "resolution", 128, 0.0240, 0.07, 40),
+        # K: 64 within 1% of 16 but not smaller or cheaper: recommend 16, the baseline.
+        _row("volume", "directions", 16, 0.0346, 0.05, 10),
+        _row("volume", "directions", 64, 0.0345, 0.07, 30),
+    ]
+    rec = bench.recommend(rows)
+    base = {"quality": "high", "splat": "disc", "resolution": 64, "directions": 16}
+    change, keep = analyse.default_changes(rec, base)
+    assert [(r["axis"], r["value"]) for r in change] == [("resolution", 128)]
+    assert [(r["axis"], r["value"]) for r in keep] == [("splat", "ellipse")]
+    # A baseline the block did not measure cannot be kept.
+    change, _ = analyse.default_changes(rec, {**base, "resolution": 256})
+    assert ("resolution", 128) in [(r["axis"], r["value"]) for r in change]
+
+
+def test_renderer_by_distance_and_frame_spread():
+    def grid(camera, scale, renderer, error, cpu, lo, mid, hi):
+        return {"status": "ok", "blocks": "grid", "camera": camera, "distance_scale": scale,
+                "camera_voxel_px": 2.0 / scale, "renderer": renderer, "method": renderer, "error": error,
+                "frame_s": mid, "frame_cpu_s": cpu, "frame_min_s": lo, "frame_max_s": hi, "frames": 7}  # fmt: skip
+
+    rows = [
+        grid("far", 2.0, "mesh-1spp", 0.060, 0.04, 0.04, 0.05, 0.06),
+        grid("far", 2.0, "mesh-4x4", 0.013, 0.10, 0.10, 0.10, 0.10),
+        grid("far", 2.0, "volume", 0.0140, 0.03, 0.02, 0.04, 0.08),
+        grid("fill", 1.0, "mesh-1spp", 0.040, 0.05, 0.05, 0.05, 0.05),
+        grid("fill", 1.0, "mesh-4x4", 0.007, 0.30, 0.30, 0.30, 0.30),
+        grid("fill", 1.0, "volume", 0.070, 0.50, 0.50, 0.50, 0.50),
+    ]
+    by = {d["camera"]: d for d in analyse.renderer_by_distance(rows)}
+    assert list(by) == ["fill", "far"]  # nearest first
+    assert by["fill"]["best"]["renderer"] == by["fill"]["pick"]["renderer"] == "mesh-4x4"
+    assert by["fill"]["beats_1spp"]["renderer"] == "mesh-4x4"  # the volume is worse than 1 spp
+    # 0.0140 is within 10% of 0.013 and a third of the CPU time.
+    assert by["far"]["best"]["renderer"] == "mesh-4x4" and by["far"]["pick"]["renderer"] == "volume"
+    assert analyse.frame_spread(rows[2]) == pytest.approx((0.08 - 0.02) / 0.04)
+    assert math.isnan(analyse.frame_spread({"frame_min_s": None, "frame_s": 0.1, "frame_max_s": 0.2}))
+    t = analyse.timing_summary(rows)
+    spreads = [0.4, 0.0, 1.5, 0.0, 0.0, 0.0]
+    assert t["rows"] == 6 and t["spread_max"] == pytest.approx(1.5) and t["worst"] is rows[2]
+    assert t["spread_median"] == pytest.approx(float(np.median(spreads)))
+    assert t["per_renderer"]["volume"]["spread_median"] == pytest.approx(0.75)
+
+
+def test_code_version_is_the_checkout_commit():
+    import subprocess
+    from pathlib import Path
+
+    root = Path(bench.__file__).resolve().parent
+    try:
+        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True,
+                              check=True).stdout.strip()  # fmt: skip
+    except (OSError, subprocess.CalledProcessError):
+        pytest.skip("the package is not in a git checkout")
+    version = run.code_version()
+    assert version["commit"] == head and isinstance(version["dirty"], bool)
+
+
 def test_case_render_options():
     base = bench.PRESETS["full"].baseline
-    splat = bench._splat_case("fill", base)
-    assert splat.render_options() == {"splat": base["splat"], "quality": "fast"}
+    splat = bench.splat_case("fill", base)
+    assert splat.render_options() == {"splat": base["splat"], "quality": "high"}
     assert splat.points_key is not None
-    vol = bench._volume_case("fill", base)
+    vol = bench.volume_case("fill", base)
     assert vol.render_options() == {"normal": "mean"}
     # Level of detail: the renderer makes the points, so it gets their options.
     lod = replace(splat, extra=(("lod", True), ("pixel_error", 2.0)))
     assert lod.lod and lod.points_key is None
     assert lod.render_options() == {
-        "splat": base["splat"], "quality": "fast", "placement": "centroid", "per_entry": 1,
+        "splat": base["splat"], "quality": "high", "placement": "centroid", "per_entry": 1,
         "point_normal": "mean", "lod": True, "pixel_error": 2.0,
     }  # fmt: skip
     quick = bench.PRESETS["quick"]
     cam = bench.make_cameras(np.array([[0.0, 0, 0], [1, 1, 1]]), quick)[0]
-    row = bench._blank_row(lod, ["lod"], cam, quick, scenes.quad())
+    row = bench.blank_row(lod, ["lod"], cam, quick, scenes.quad())
     assert row["lod"] is True and row["pixel_error"] == 2.0 and "extra" not in row
     assert bench.label(row).endswith("lod")
 
 
-def test_missing_renderer_is_skipped_other_errors_fail():
-    exc = ModuleNotFoundError("No module named 'aniso3d.rendering.splat'", name="aniso3d.rendering.splat")
-    status, reason = bench.classify_failure(exc, "splat")
+def test_not_implemented_is_skipped_other_errors_fail():
+    status, reason = bench.classify_failure(NotImplementedError("aniso3d.rendering.splat is off"), "splat")
     assert status == "skipped" and "rendering.splat" in reason
     assert bench.classify_failure(NotImplementedError("soon"), "volume")[0] == "skipped"
     assert bench.classify_failure(ValueError("bad"), "volume") == ("failed", "ValueError: bad")
-    other = ModuleNotFoundError("No module named 'numpy'", name="numpy")
-    assert bench.classify_failure(other, "splat")[0] == "failed"
+    # Every renderer module exists: a missing one is a broken install, not a skip.
+    for name in ("aniso3d.rendering.splat", "numpy"):
+        missing = ModuleNotFoundError(f"No module named '{name}'", name=name)
+        assert bench.classify_failure(missing, "splat")[0] == "failed"
 
 
 def test_csv_and_json_keep_every_column_and_mark_unmeasured_values():
@@ -245,6 +315,19 @@ def test_bench_smoke_end_to_end(gl_available, tmp_path, capsys):
         assert float(r["frame_s"]) > 0 and -1 <= float(r["ssim"]) <= 1
         if metrics.flip_available():
             assert 0 <= float(r["flip"]) <= 1
+        assert float(r["frame_min_s"]) <= float(r["frame_s"]) <= float(r["frame_max_s"])
+    # The run states which code, preset and machine load produced it.
+    report = (out / "report.md").read_text()
+    head = report.split("## ", 1)[0]
+    assert "**Preset** `smoke`" in head and "**Code**" in head and "**Frame times**" in head
+    assert "## Frame-time spread" in report
+    meta = json.loads((out / "results.json").read_text())["meta"]
+    assert meta["code"]["commit"] is None or meta["code"]["commit"] in head
+    if hasattr(os, "getloadavg"):
+        load = meta["load_average"]
+        assert len(load["start_1_5_15"]) == 3 and len(load["end_1_5_15"]) == 3
+        assert f"{load['start']:.2f} at the start" in head
+        assert all(r["load_1min"] != "" for r in measured)
     assert "wrote" in capsys.readouterr().out
 
 
@@ -256,13 +339,11 @@ def test_unavailable_renderer_is_recorded_as_skipped(gl_available, tmp_path, mon
 
     def no_splat(self, method):
         if method == "splat":
-            raise ModuleNotFoundError(
-                "No module named 'aniso3d.rendering.splat'", name="aniso3d.rendering.splat"
-            )
+            raise NotImplementedError("aniso3d.rendering.splat is switched off in this test")
         return real(self, method)
 
     monkeypatch.setattr(Renderer, "method_renderer", no_splat)
-    monkeypatch.setattr(bench, "matplotlib_available", lambda: False)
+    monkeypatch.setattr(plots, "matplotlib_available", lambda: False)
     settings = replace(bench.PRESETS["smoke"], size=(64, 64), resolutions=(16,), mesh_ssaa=(1,))
     mesh = scenes.tree(levels=4, leaves_per_twig=20)
     result = bench.run_bench(mesh, settings, with_flip=False)

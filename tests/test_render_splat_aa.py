@@ -233,7 +233,7 @@ def test_minified_tree_beats_the_old_modes_and_one_sample_polygons(r):
     # near: high 22.9, 1-spp polygons 19.9, blend 15.2. Bounds: far, high at
     # least 5 dB above 1-spp polygons and 10 dB above blend; near, high at
     # least 2 dB above blend.
-    from aniso3d.bench.cli_tmp import crop_box
+    from aniso3d.bench.cameras import crop_box
     from aniso3d.metrics import psnr
 
     tree = aniso3d.scenes.tree(levels=4, leaves_per_twig=20)

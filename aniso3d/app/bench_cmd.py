@@ -1,7 +1,78 @@
-"""``aniso3d bench``: the speed/size/accuracy sweep (see :mod:`aniso3d.bench`)."""
+"""``aniso3d bench``: the speed/size/accuracy sweep (see :mod:`aniso3d.bench`).
+
+This module owns the command line: it parses the options, loads the input and
+hands the bench a mesh, the settings and a progress bar; the bench itself knows
+nothing of the command line.
+"""
 
 from __future__ import annotations
 
-from aniso3d.bench.cli_tmp import register
+import argparse
+import sys
+from pathlib import Path
 
-__all__ = ["register"]
+from aniso3d.app.common import Progress, image_size, load_input, positive_int
+from aniso3d.errors import InputError
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "bench",
+        help="measure speed, size and error of every renderer and setting against a supersampled ground truth",
+        description=(
+            "Sweep resolution, directions K, point placement, splat shape, quality, renderer and camera "
+            "distance for a scene; write results.csv, results.json, plots and report.md into OUTDIR."
+        ),
+    )
+    p.add_argument("mesh", nargs="?", default=None, help="mesh file or scene:NAME (default: the built-in tree)")
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--quick", action="store_true", help="a run of a few minutes (256x256, fewer settings)")
+    mode.add_argument("--smoke", action="store_true", help="a run of seconds that exercises every path (tests)")
+    p.add_argument("-o", "--output", default="bench-out", metavar="OUTDIR", help="output folder (default: ./bench-out)")
+    p.add_argument("--size", type=image_size, default=None, help="image size, e.g. 512 or 800x600 (default: preset's)")
+    p.add_argument("--frames", type=positive_int, default=None, help="timed frames per configuration")
+    p.add_argument("--gt-ssaa", type=positive_int, default=None, help="ground-truth samples per pixel along each axis")
+    p.add_argument("--no-flip", action="store_true", help="skip FLIP even when flip-evaluator is installed")
+    p.add_argument("--no-plots", action="store_true", help="write CSV, JSON and the report only")
+    p.add_argument("--backend", default="auto", help="OpenGL backend: auto, egl, osmesa, x11")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_bench)
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    from aniso3d.bench import label, preset_settings, run_bench, write_outputs
+    from aniso3d.build.mesh import Mesh
+
+    preset = "smoke" if args.smoke else "quick" if args.quick else "full"
+    settings = preset_settings(preset, size=args.size, frames=args.frames, gt_ssaa=args.gt_ssaa)
+    outdir = Path(args.output)
+    if outdir.exists() and not outdir.is_dir():
+        raise InputError(f"output '{outdir}' is a file; bench writes a folder of results")
+    if args.mesh and Path(args.mesh).exists() and Path(args.mesh).resolve() == outdir.resolve():
+        raise InputError(f"output folder '{outdir}' is the input; choose another -o")
+    mesh = load_input(args.mesh)
+    if not isinstance(mesh, Mesh):
+        raise InputError(f"'{args.mesh}' is not a polygon mesh; the bench needs the polygons for its ground truth")
+    outdir.mkdir(parents=True, exist_ok=True)
+    progress = Progress(f"bench {settings.name}", enabled=False if args.quiet else None)
+    result = run_bench(mesh, settings, progress=progress, with_flip=False if args.no_flip else None,
+                       backend=args.backend)  # fmt: skip
+    inputs = (args.mesh,) if args.mesh else ()
+    written, notes = write_outputs(result, outdir, inputs=inputs, with_plots=not args.no_plots)
+    counts = {s: sum(r["status"] == s for r in result.rows) for s in ("ok", "skipped", "failed")}
+    print(
+        f"{len(result.rows)} configurations in {result.meta['seconds']:.0f} s: "
+        f"{counts['ok']} measured, {counts['skipped']} skipped, {counts['failed']} failed"
+    )
+    for reason in sorted({r["reason"] for r in result.rows if r["status"] == "skipped"}):
+        print(f"skipped: {reason}")
+    for note in notes:
+        print(f"note: {note}")
+    for path in written:
+        print(f"wrote {path}")
+    for r in result.failed:
+        print(f"failed: {label(r, verbose=True)} at {r['camera']}: {r['reason']}", file=sys.stderr)
+    return 1 if result.failed else 0
+
+
+__all__ = ["cmd_bench", "register"]
