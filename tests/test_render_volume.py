@@ -224,7 +224,7 @@ def test_quad_head_on_matches_closed_form_and_polygons(r, quad_tex, tmp_path):
     dirs, _, _ = pixel_rays(cam, SIZE, tex.bounds)
     x = (np.abs(dirs[..., 0]) + np.abs(dirs[..., 1])) / np.abs(dirs[..., 2])
     expect = 1.0 - (x / (1.0 + x)) ** (1.0 + x)
-    exp_img, _ = render_float(r, tex, cam)
+    exp_img, _ = render_float(r, tex, cam, opacity="exponential")
     lin_img, _ = render_float(r, tex, cam, opacity="linear")
     err = np.abs(exp_img[..., 3] - expect)[core].max()
     assert err < 1 / 255, f"exponential alpha off the closed form by {err:.4f} " + dump(

@@ -87,7 +87,21 @@ NEIGHBOURS = 4
 STEPS = ("dda",)
 DENSITY_MODES = ("facet", "kernel", "nearest")
 NORMAL_MODES = ("mean", "sample")
-OPACITY_MODES = ("exponential", "linear")
+OPACITY_MODES = ("exponential", "linear", "split", "planar")
+#: The opacity law drawn when none is asked for (chosen by demos/bench_coverage.py).
+DEFAULT_OPACITY = "planar"
+#: Sheet crossing tolerance, voxel units along the sheet's normal: a ray that
+#: crosses a sheet within it of a voxel face counts in both voxels, never in
+#: neither (float32 puts the same point a few 1e-5 apart in the two voxels).
+SHEET_EPS = 1e-3
+#: An entry is drawn as a sheet in proportion to how much of its plane's
+#: section of the voxel it fills: ramp from 0 at the first value to 1 at the
+#: second (see :func:`sheet_share`).
+SHEET_FILL = (0.0, 0.0)
+#: ... and to the length of its mean normal (1: coplanar facets).
+SHEET_COHERENCE = (0.0, 0.0)
+#: uint32 words per shading entry on the GPU (three uvec4; see volume.frag).
+ENTRY_WORDS = 12
 #: OpenGL version the shaders need (shader storage buffers).
 REQUIRE_GL = 430
 _BIG = 1e30
@@ -169,11 +183,20 @@ def voxel_colors(
     w = w / np.linalg.norm(w)
     voxels = np.arange(texture.n_voxels) if voxels is None else np.asarray(voxels, dtype=np.int64)
     rows, owner = _entry_rows(texture, voxels)
+    c, n = _entry_colors(texture, w, lighting, normal, rows)
+    area = np.asarray(texture.entry_area, dtype=np.float64)[rows]
+    return _weighted_colors(owner, len(voxels), c, area * np.abs(n @ w), area)
+
+
+def _entry_colors(
+    texture: AnisoTexture, w: np.ndarray, lighting: Lighting, normal: str, rows: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(E', 3) shaded colours, clamped to [0, 1], of entries ``rows`` seen along
+    the unit vector ``w``, and (E', 3) the normals they were shaded with."""
     if normal == "mean":
         n = np.asarray(texture.entry_normal, dtype=np.float64)[rows]
     else:
         n = texture.directions[texture.entry_direction[rows]]
-    area = np.asarray(texture.entry_area, dtype=np.float64)[rows]
     c = shade_np(
         n,
         -w,
@@ -182,9 +205,14 @@ def voxel_colors(
         texture.entry_shininess[rows],
         lighting,
     )
-    c = np.clip(c, 0.0, 1.0)
-    wgt = area * np.abs(n @ w)
-    V = len(voxels)
+    return np.clip(c, 0.0, 1.0), n
+
+
+def _weighted_colors(
+    owner: np.ndarray, V: int, c: np.ndarray, wgt: np.ndarray, area: np.ndarray
+) -> np.ndarray:
+    """(V, 3) per-voxel mean of entry colours ``c`` weighted by ``wgt``, or by
+    ``area`` where the weights vanish (a voxel seen edge-on); 0 if both do."""
     sum_w = np.bincount(owner, wgt, minlength=V)
     sum_a = np.bincount(owner, area, minlength=V)
     col_w = np.stack([np.bincount(owner, wgt * c[:, i], minlength=V) for i in range(3)], 1)
@@ -193,6 +221,182 @@ def voxel_colors(
     with np.errstate(invalid="ignore", divide="ignore"):
         out = np.where(use_w[:, None], col_w / sum_w[:, None], col_a / sum_a[:, None])
     return np.where(np.isfinite(out), out, 0.0)
+
+
+# ------------------------------------------------------------- the sheets
+
+#: The unit cube's corners and its 12 edges (pairs of corner indices).
+_CORNERS = np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], dtype=np.float64)
+_EDGES = np.array([(a, a | 1 << k) for a in range(8) for k in range(3) if not a >> k & 1])
+
+
+def plane_section_area(normal: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    """(N,) area of the unit cube's section ``{x in [0, 1]^3 : n . x = d}`` by
+    the planes of unit normals ``normal`` (N, 3) and offsets ``offset`` (N,):
+    the polygon where each plane crosses the cube's 12 edges, fanned from its
+    mean vertex. 0 where a plane misses the cube. Units: cube faces (h^2)."""
+    n = np.asarray(normal, dtype=np.float64).reshape(-1, 3)
+    d = np.asarray(offset, dtype=np.float64).reshape(-1)
+    s = n @ _CORNERS.T - d[:, None]  # (N, 8) signed distances of the corners
+    sa, sb = s[:, _EDGES[:, 0]], s[:, _EDGES[:, 1]]
+    cross = ((sa <= 0) & (sb >= 0) | (sa >= 0) & (sb <= 0)) & (sa != sb)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(cross, sa / (sa - sb), 0.0)
+    a, b = _CORNERS[_EDGES[:, 0]], _CORNERS[_EDGES[:, 1]]
+    pts = a[None] + t[..., None] * (b - a)[None]  # (N, 12, 3)
+    count = cross.sum(axis=1)
+    centre = (pts * cross[..., None]).sum(axis=1) / np.maximum(count, 1)[:, None]
+    helper = np.where((np.abs(n[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    u = np.cross(n, helper)
+    u /= np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-300)
+    v = np.cross(n, u)
+    rel = pts - centre[:, None]
+    ang = np.arctan2(np.einsum("nek,nk->ne", rel, v), np.einsum("nek,nk->ne", rel, u))
+    order = np.argsort(np.where(cross, ang, np.inf), axis=1)
+    rel = np.take_along_axis(rel, order[..., None], axis=1)
+    i = np.arange(len(_EDGES))[None]
+    nxt = np.where(i + 1 < count[:, None], i + 1, 0)
+    rel_next = np.take_along_axis(rel, nxt[..., None], axis=1)
+    tri = np.einsum("nek,nk->ne", np.cross(rel, rel_next), n)
+    area = 0.5 * np.abs(np.where(i < count[:, None], tri, 0.0)).sum(axis=1)
+    return np.where(count >= 3, area, 0.0)
+
+
+def sheet_share(fill: np.ndarray, coherence: np.ndarray) -> np.ndarray:
+    """(E,) share in [0, 1] of each entry's area drawn as a sheet (crossed once
+    by a ray) rather than as a cloud (spread through the voxel). ``fill`` (E,)
+    is the entry's area over its plane's section of the voxel; ``coherence``
+    (E,) the length of its mean normal (1 for coplanar facets)."""
+    lo, hi = SHEET_FILL
+    f = np.clip((np.asarray(fill, np.float64) - lo) / max(hi - lo, 1e-9), 0.0, 1.0)
+    lo, hi = SHEET_COHERENCE
+    c = np.clip((np.asarray(coherence, np.float64) - lo) / max(hi - lo, 1e-9), 0.0, 1.0)
+    return f * c
+
+
+@dataclass(frozen=True)
+class EntrySheets:
+    """Each shading entry of a texture read as a sheet: the plane through its
+    facets' centroid normal to their mean normal, in voxel-local grid
+    coordinates (the voxel is the unit cube).
+
+    Attributes:
+        normal: (E, 3) unit normal (0 where the facets have no mean direction).
+        offset: (E,) the plane ``normal . x = offset``.
+        section: (E,) area of the plane's section of the voxel, h^2.
+        fill: (E,) coverage of that section by the sheet part, in [0, 1].
+        area: (E,) facet area drawn as a sheet, h^2 (``fill * section``); the
+            rest, ``entry_area - area``, is drawn as a cloud.
+    """
+
+    normal: np.ndarray
+    offset: np.ndarray
+    section: np.ndarray
+    fill: np.ndarray
+    area: np.ndarray
+
+
+def entry_sheets(texture: AnisoTexture) -> EntrySheets:
+    """The sheets of ``texture``'s entries (see :class:`EntrySheets`), derived
+    from what every texture stores (entry area, mean normal, centroid), so
+    old files and every pyramid level have them."""
+    n = np.asarray(texture.entry_normal, dtype=np.float64)
+    ell = np.linalg.norm(n, axis=1)
+    coherent = ell > 1e-6
+    nh = np.where(coherent[:, None], n / np.where(coherent, ell, 1.0)[:, None], 0.0)
+    h = float(texture.voxel_size)
+    cell = np.asarray(texture.coords, dtype=np.float64)[texture.entry_voxel]
+    local = (np.asarray(texture.entry_centroid, np.float64) - np.asarray(texture.origin, np.float64)) / h - cell
+    # The outer cells are unbounded (clip.py): keep the plane on the cube.
+    d = np.clip(np.sum(nh * local, axis=1), np.minimum(nh, 0).sum(1), np.maximum(nh, 0).sum(1))
+    section = np.where(coherent, plane_section_area(nh, d), 0.0)
+    area = np.asarray(texture.entry_area, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        raw = np.where(section > 1e-9, area / section, 0.0)
+    share = np.where(section > 1e-9, sheet_share(raw, ell), 0.0)
+    sheet_area = share * np.minimum(area, section)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        fill = np.where(section > 1e-9, sheet_area / section, 0.0)
+    return EntrySheets(nh, d, section, np.clip(fill, 0.0, 1.0), sheet_area)
+
+
+@dataclass
+class SheetTerms:
+    """What the sheet laws ("split", "planar") need of each voxel a ray
+    crosses, all (V,) or (V, 3):
+
+    - ``projected``: the sheets' projected area ``sum A_s |n . w|`` (h^2);
+    - ``crossed``: "planar": the sum of the fills of the sheets the ray
+      crosses inside the voxel; "split": ``projected`` (their linear rate);
+    - ``t_cross``: "planar": the fill-weighted mean ray parameter of those
+      crossings, from the voxel's entry (grid units);
+    - ``sheet_color`` and ``cloud_color``: the entries' shaded colours weighted
+      by what each adds to the sheet part and by its cloud area ``(A - A_s)
+      |n . w|``.
+    """
+
+    projected: np.ndarray
+    crossed: np.ndarray
+    t_cross: np.ndarray
+    sheet_color: np.ndarray
+    cloud_color: np.ndarray
+
+
+def sheet_terms(
+    texture: AnisoTexture,
+    w: np.ndarray,
+    lighting: Lighting,
+    voxels: np.ndarray,
+    x_in: np.ndarray,
+    chords: np.ndarray,
+    opacity: str = DEFAULT_OPACITY,
+    normal: str = "mean",
+    sheets: EntrySheets | None = None,
+) -> SheetTerms:
+    """:class:`SheetTerms` of ``voxels`` (V,) crossed along the unit vector
+    ``w`` from the voxel-local points ``x_in`` (V, 3; the voxel is the unit
+    cube) over ``chords`` (V,) grid units. Mirrors composite() in volume.frag.
+
+    A ray crosses a sheet's plane inside the voxel when the plane's signed
+    distance changes sign (within :data:`SHEET_EPS`) between where it enters
+    and leaves: a plane cut into many voxels is crossed in exactly one of
+    them, whatever the angle."""
+    w = np.asarray(w, dtype=np.float64)
+    w = w / np.linalg.norm(w)
+    voxels = np.asarray(voxels, dtype=np.int64)
+    V = len(voxels)
+    sh = entry_sheets(texture) if sheets is None else sheets
+    rows, owner = _entry_rows(texture, voxels)
+    c, n = _entry_colors(texture, w, lighting, normal, rows)
+    area = np.asarray(texture.entry_area, dtype=np.float64)[rows]
+    nh, a_s = sh.normal[rows], sh.area[rows]
+    nw = nh @ w
+    projected = np.bincount(owner, a_s * np.abs(nw), minlength=V)
+    if opacity == "split":
+        ws = a_s * np.abs(nw)
+        t_hit = np.zeros(len(rows))
+    else:
+        s_in = np.einsum("ek,ek->e", nh, np.asarray(x_in, np.float64)[owner]) - sh.offset[rows]
+        s_out = s_in + nw * np.asarray(chords, np.float64)[owner]
+        hit = (np.minimum(s_in, s_out) <= SHEET_EPS) & (np.maximum(s_in, s_out) >= -SHEET_EPS)
+        ws = np.where(hit & (a_s > 0), sh.fill[rows], 0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_hit = np.where(nw != 0, -s_in / nw, 0.0)
+        t_hit = np.clip(t_hit, 0.0, np.asarray(chords, np.float64)[owner])
+    crossed = np.bincount(owner, ws, minlength=V)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_cross = np.where(crossed > 0, np.bincount(owner, ws * t_hit, minlength=V) / crossed, 0.0)
+    zero = np.zeros(len(rows))
+    sheet_color = _weighted_colors(owner, V, c, ws, zero)
+    cloud_w = np.maximum(area - a_s, 0.0) * np.abs(n @ w)
+    all_w = area * np.abs(n @ w)
+    cloud_color = np.where(
+        (np.bincount(owner, cloud_w, minlength=V) > 1e-7 * np.bincount(owner, area, minlength=V))[:, None],
+        _weighted_colors(owner, V, c, cloud_w, zero),
+        _weighted_colors(owner, V, c, all_w, area),
+    )
+    return SheetTerms(projected, crossed, t_cross, sheet_color, cloud_color)
+
 
 
 # ------------------------------------------------------------ the NumPy ray
@@ -219,7 +423,7 @@ def march_ray_np(
     t_range: tuple[float, float] = (0.0, np.inf),
     density: str = "facet",
     normal: str = "mean",
-    opacity: str = "exponential",
+    opacity: str = DEFAULT_OPACITY,
 ) -> tuple[np.ndarray, float]:
     """One ray through ``texture``, the slow twin of a GPU pixel.
 
@@ -240,7 +444,7 @@ def trace_ray_np(
     t_range: tuple[float, float] = (0.0, np.inf),
     density: str = "facet",
     normal: str = "mean",
-    opacity: str = "exponential",
+    opacity: str = DEFAULT_OPACITY,
 ) -> RayTrace:
     """:func:`march_ray_np` with what the ray met (see :class:`RayTrace`)."""
     _check_choice(density, DENSITY_MODES, "density reading")
@@ -287,7 +491,7 @@ def trace_ray_np(
             key = (cell[0] * sy + cell[1]) * sz + cell[2]
             i = int(np.searchsorted(keys, key))
             if i < len(keys) and keys[i] == key:
-                hits.append((i, t, te - t))
+                hits.append((i, t, te - t, cell.copy()))
             t = te
         if tx >= t1:
             break
@@ -301,32 +505,71 @@ def trace_ray_np(
     vox = np.array([hv[0] for hv in hits], dtype=np.int64)
     dens = density_along(texture, d, density, vox) if len(vox) else np.zeros(0)
     cols = voxel_colors(texture, d, lighting, normal, vox) if len(vox) else np.zeros((0, 3))
+    st = None
+    if opacity in ("split", "planar") and len(vox):
+        t_in = np.array([hv[1] for hv in hits])
+        chords = np.array([hv[2] for hv in hits])
+        x_in = o + d * t_in[:, None] - np.array([hv[3] for hv in hits], dtype=np.float64)
+        st = sheet_terms(texture, d, lighting, vox, x_in, chords, opacity, normal)
     C, T = np.zeros(3), 1.0
-    for (v, ti, chord), D, col in zip(hits, dens, cols, strict=True):
+    tau_s, T_f = 0.0, 1.0  # "split": the sheets' linear depth, the cloud's transmittance
+    for k, ((v, ti, chord, _), D, col) in enumerate(zip(hits, dens, cols, strict=True)):
         if T <= T_MIN:
             break
         if opacity == "exponential":
             alpha = min(max(D / P, 0.0), ALPHA_MAX)
             sigma = -np.log1p(-alpha) * P
             seg = -T * np.expm1(-sigma * chord)
-        else:
+        elif opacity == "linear":
             sigma = min(max(D, 0.0), P)
             seg = min(T, sigma * chord)
+        else:
+            alpha_f = min(max(D - st.projected[k], 0.0) / P, ALPHA_MAX)
+            sigma = -np.log1p(-alpha_f) * P
+            keep_f = np.exp(-sigma * chord)
+            if opacity == "split":
+                a_s = min(st.projected[k], P) * chord
+                tau_s += a_s
+                T_f *= keep_f
+                t_after = max(0.0, 1.0 - tau_s) * T_f
+            else:
+                a_s = min(st.crossed[k], 1.0)
+                t_after = T * (1.0 - a_s) * keep_f
+            seg = T - t_after
+            a_s, a_f = min(a_s, 1.0), 1.0 - keep_f
+            if a_s + a_f > 0.0:
+                col = (a_s * st.sheet_color[k] + a_f * st.cloud_color[k]) / (a_s + a_f)
         if not seg > 0.0:
             continue
         out.voxels.append(v)
         out.t_enter.append(ti * h)
         out.chords.append(chord * h)
         if out.t50 is None and T - seg <= 0.5:
-            dt = 0.0
-            if T > 0.5:
-                dt = np.log(T / 0.5) / sigma if opacity == "exponential" else (T - 0.5) / sigma
-            out.t50 = (ti + dt) * h
+            out.t50 = (ti + _t50_offset(opacity, T, seg, sigma, chord, st, k)) * h
         C += seg * col
         T -= seg
     out.rgb = np.clip(C + T * bg, 0.0, 1.0)
     out.alpha = float(np.clip(1.0 - T, 0.0, 1.0))
     return out
+
+
+def _t50_offset(
+    opacity: str, T: float, seg: float, sigma: float, chord: float, st: SheetTerms | None, k: int
+) -> float:
+    """Where in a voxel (ray parameter from its entry, grid units) 1 - T
+    reaches 0.5, given T before it and ``seg`` taken in it. Mirrors volume.frag."""
+    if T <= 0.5:
+        return 0.0
+    if opacity == "exponential":
+        return float(np.log(T / 0.5) / sigma)
+    if opacity == "linear":
+        return (T - 0.5) / sigma
+    if opacity == "split":
+        return chord * (T - 0.5) / seg
+    behind = T * (1.0 - min(st.crossed[k], 1.0))  # after the sheets alone
+    if behind <= 0.5:
+        return float(st.t_cross[k])
+    return float(np.log(behind / 0.5) / sigma)
 
 
 # --------------------------------------------------------------- GPU layout
@@ -335,7 +578,8 @@ def trace_ray_np(
 def pack_volume(texture: AnisoTexture) -> dict[str, np.ndarray]:
     """The arrays volume.frag reads, in upload order (see its header): the
     two-level index (``top``, ``pool``), ``offsets``, ``density`` (float16
-    pairs in uint32), ``entries`` (8 uint32 per entry) and ``directions``.
+    pairs in uint32), ``entries`` (:data:`ENTRY_WORDS` uint32 per entry: the
+    shading entry and its sheet, :func:`entry_sheets`) and ``directions``.
     CPU only; checks the texture holds finite numbers."""
     if not isinstance(texture, AnisoTexture):
         raise InputError(f"the volume renderer draws an AnisoTexture, got {type(texture).__name__}")
@@ -380,7 +624,8 @@ def pack_volume(texture: AnisoTexture) -> dict[str, np.ndarray]:
     density = dens16.view(np.uint32)
 
     E = texture.n_entries
-    entries = np.zeros((E, 8), dtype=np.uint32)
+    sheets = entry_sheets(texture)
+    entries = np.zeros((E, ENTRY_WORDS), dtype=np.uint32)
     entries[:, 0:3] = np.asarray(texture.entry_normal, dtype=np.float32).view(np.uint32)
     entries[:, 3] = np.asarray(texture.entry_area, dtype=np.float32).view(np.uint32)
     half = np.zeros((E, 4), dtype=np.float16)
@@ -389,6 +634,9 @@ def pack_volume(texture: AnisoTexture) -> dict[str, np.ndarray]:
     entries[:, 4:6] = half.view(np.uint32)
     entries[:, 6] = np.asarray(texture.entry_shininess, dtype=np.float32).view(np.uint32)
     entries[:, 7] = np.asarray(texture.entry_direction, dtype=np.uint32)
+    entries[:, 8] = sheets.offset.astype(np.float32).view(np.uint32)
+    entries[:, 9] = sheets.fill.astype(np.float32).view(np.uint32)
+    entries[:, 10] = sheets.area.astype(np.float32).view(np.uint32)
 
     directions = np.zeros((K, 4), dtype=np.float32)
     directions[:, :3] = texture.directions
@@ -458,6 +706,7 @@ class VolumeRenderer:
             "ALPHA_MAX": float(np.float32(ALPHA_MAX)),
             "T_MIN": T_MIN,
             "BIG": _BIG,
+            "SHEET_EPS": SHEET_EPS,
         }
         self.prog = gl.program("volume.vert", "volume.frag", defines=defines)
         self.vao = gl.track(ctx.vertex_array(self.prog, []))
@@ -523,7 +772,7 @@ class VolumeRenderer:
         step: str = "dda",
         density: str = "facet",
         normal: str = "mean",
-        opacity: str = "exponential",
+        opacity: str = DEFAULT_OPACITY,
         pixel_error: float | None = None,
         **unknown,
     ) -> None:
