@@ -14,8 +14,10 @@
 // near); u_shape grid cells, u_bricks brick cells; u_center_g grid centre
 // (grid coords, minimum corner at 0); u_num_dirs K; u_density_mode 0 facet /
 // 1 kernel / 2 nearest; u_normal_mode 0 mean / 1 sample; u_opacity_mode 0
-// exponential / 1 linear / 2 split / 3 planar; u_background RGB; the lighting
-// uniforms of lighting.glsl.
+// exponential / 1 linear / 2 split / 3 planar; u_pixel_angle the angle a
+// pixel spans (radians, 2 tan(fov/2) / height) and u_sheet_pixels the voxel
+// sizes in pixels over which every sheet fades in (render/volume.py:
+// sheet_share); u_background RGB; the lighting uniforms of lighting.glsl.
 // In (SSBOs, laid out by aniso3d/render/volume.py:pack_volume):
 //   0 top[]      int, brick id of each brick cell or -1 (x fastest)
 //   1 pool[]     int, voxel index of each cell of each brick or -1
@@ -23,9 +25,11 @@
 //   3 dens[]     uint, density sphere D_v(N_p) (M x K) as float16 pairs
 //   4 ent[]      uvec4 x 3 per entry: (mean normal xyz, area) as float bits;
 //                (half2(kd.rg), half2(kd.b, ks), shininess bits, sample index);
-//                the entry's sheet (render/volume.py:entry_sheets): (plane
-//                offset d, fill, sheet area A_s, unused) as float bits, the
-//                plane n/|n| . x = d in voxel-local coordinates (unit cube)
+//                the entry's sheet (render/volume.py:entry_sheets): plane
+//                offset d as float bits (the plane n/|n| . x = d in
+//                voxel-local coordinates, the voxel being the unit cube),
+//                half2(fill, static share), sheet area and crossing slack as
+//                float bits
 //   5 dirs[]     vec4, the K sample directions N_p (xyz)
 // Out: f_color = (C + T * background, 1 - T), C the premultiplied colour and
 // T the transmittance left; gl_FragDepth where 1 - T first reaches 0.5 (1.0
@@ -34,8 +38,7 @@
 
 // Injected by render/volume.py: BRICK (brick edge in voxels), ALPHA_MAX
 // (coverage cap below 1 so the optical depth stays finite), T_MIN (early
-// termination), BIG (stands for an infinite ray parameter), SHEET_EPS (sheet
-// crossing tolerance, voxel units).
+// termination), BIG (stands for an infinite ray parameter).
 
 uniform vec2 u_size;
 uniform vec3 u_forward;
@@ -54,6 +57,8 @@ uniform int u_num_dirs;
 uniform int u_density_mode;
 uniform int u_normal_mode;
 uniform int u_opacity_mode;
+uniform float u_pixel_angle;
+uniform vec2 u_sheet_pixels;
 uniform vec3 u_background;
 
 layout(std430, binding = 0) readonly buffer TopIndex { int top[]; };
@@ -75,6 +80,7 @@ vec3 g_color;      // premultiplied colour so far
 float g_trans;     // transmittance so far
 float g_tau_s;     // split: the sheets' optical depth so far (adds up linearly)
 float g_trans_f;   // split: the clouds' transmittance so far
+float g_dist0;     // distance (grid units) from the eye to the ray's origin o
 float g_t50;       // ray parameter (grid units, from o) where 1 - T reached 0.5
 bool g_has50;      // whether it did (t can be negative: o may lie past near)
 
@@ -135,6 +141,10 @@ void composite(int v, vec3 x_in, float t0, float chord) {
     float sum_a = 0.0;
     // Sheet laws (split, planar): each entry's sheet part and cloud part.
     bool sheets = u_opacity_mode >= 2;
+    // Share of the sheets drawn as sheets at this scale (sheet_share()): all
+    // of them where the voxel spans enough pixels.
+    float pixels = 1.0 / ((g_dist0 + t0 + 0.5 * chord) * u_pixel_angle);
+    float zoom = clamp((pixels - u_sheet_pixels.x) / max(u_sheet_pixels.y - u_sheet_pixels.x, 1e-9), 0.0, 1.0);
     float sheet_proj = 0.0;    // sum A_s |n . w|: the sheets' projected area
     float crossed = 0.0;       // planar: fills of the sheets crossed; split: sheet_proj
     float t_cross = 0.0;       // planar: fill-weighted crossing parameter from t0
@@ -161,8 +171,10 @@ void composite(int v, vec3 x_in, float t0, float chord) {
         sum_a += area;
         if (sheets) {
             uvec4 sh = ent[3u * e + 2u];
-            float fill = uintBitsToFloat(sh.y);
-            float a_s = uintBitsToFloat(sh.z);
+            vec2 fill_share = unpackHalf2x16(sh.y);
+            float share = 1.0 - (1.0 - fill_share.y) * (1.0 - zoom);
+            float fill = share * fill_share.x;
+            float a_s = share * uintBitsToFloat(sh.z);
             float len_n = length(n);
             vec3 nh = len_n > 0.0 ? n / len_n : vec3(0.0);
             float nw = dot(nh, g_d);
@@ -175,7 +187,8 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                 // into many, whatever the angle.
                 float s_in = dot(nh, x_in) - uintBitsToFloat(sh.x);
                 float s_out = s_in + nw * chord;
-                if (min(s_in, s_out) <= SHEET_EPS && max(s_in, s_out) >= -SHEET_EPS) {
+                float slack = uintBitsToFloat(sh.w);
+                if (min(s_in, s_out) <= slack && max(s_in, s_out) >= -slack) {
                     ws = fill;
                     t_cross += fill * clamp(nw != 0.0 ? -s_in / nw : 0.0, 0.0, chord);
                 }
@@ -225,8 +238,9 @@ void composite(int v, vec3 x_in, float t0, float chord) {
             g_trans_f *= keep_f;
             t_after = max(0.0, 1.0 - g_tau_s) * g_trans_f;
         } else {
+            // Sheet and cloud share the facets: their coverages add.
             a_s = min(crossed, 1.0);
-            t_after = g_trans * (1.0 - a_s) * keep_f;
+            t_after = g_trans * max(0.0, keep_f - a_s);
         }
         seg = g_trans - t_after;
         a_s = min(a_s, 1.0);
@@ -249,8 +263,9 @@ void composite(int v, vec3 x_in, float t0, float chord) {
             } else if (u_opacity_mode == 2) {
                 dt = chord * (g_trans - 0.5) / seg;
             } else {
-                float behind = g_trans * (1.0 - min(crossed, 1.0));  // after the sheets alone
-                dt = behind <= 0.5 ? t_cross / crossed : log(behind / 0.5) / sigma;
+                float a_s = min(crossed, 1.0);
+                // The sheets alone take it there, or the cloud with them.
+                dt = g_trans * (1.0 - a_s) <= 0.5 ? t_cross / crossed : -log(0.5 / g_trans + a_s) / sigma;
             }
         }
         g_t50 = t0 + dt;
@@ -303,6 +318,7 @@ void main() {
     g_d = mix(g_d, vec3(0.0), lessThan(abs(g_d), vec3(1e-12)));
     g_p = abs(g_d.x) + abs(g_d.y) + abs(g_d.z);
     vec3 o = u_center_g + u_base_c + u_base_s * lat;
+    g_dist0 = u_base_s * length(u_forward + lat);
 
     // Ray parameter t (grid units from o) range: the grid's box, then
     // near/far. A point at t lies u_base_s + t * cos_f along forward.

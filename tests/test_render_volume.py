@@ -90,6 +90,12 @@ def dump(tmp_path, name: str, *images) -> str:
     return f"(images: {path})"
 
 
+def pixel_angle(cam: Camera, size) -> float:
+    """The angle one pixel spans, radians, as the renderer passes it to the
+    sheet law (``march_ray_np(pixel_angle=...)``)."""
+    return 2.0 * np.tan(np.radians(cam.fov) / 2) / size[1]
+
+
 def pixel_rays(cam: Camera, size, bounds):
     """Per-pixel unit directions and the (t0, t1) along each that the near
     and far planes leave, as the renderer sets them."""
@@ -368,8 +374,9 @@ def test_stacked_layers_saturate_without_overflow(r, tmp_path):
     img, _ = render_float(r, tex, Camera((0.0, 0.0, 3.0)))
     dirs, t0, t1 = pixel_rays(Camera((0.0, 0.0, 3.0)), SIZE, tex.bounds)
     rgb, alpha = march_ray_np(
-        tex, (0.0, 0.0, 3.0), dirs[64, 64], r.lighting, (t0[64, 64], t1[64, 64])
-    )
+        tex, (0.0, 0.0, 3.0), dirs[64, 64], r.lighting, (t0[64, 64], t1[64, 64]),
+        pixel_angle=pixel_angle(Camera((0.0, 0.0, 3.0)), SIZE),
+    )  # fmt: skip
     assert alpha > 0.999 and np.abs(rgb - img[64, 64, :3]).max() < 1 / 255
 
 
@@ -406,7 +413,10 @@ def test_gpu_pixels_match_the_numpy_ray(r, small_tree, opts):
         .T
     )
     for y, x in picks:
-        tr = trace_ray_np(tex, cam.position, dirs[y, x], r.lighting, (t0[y, x], t1[y, x]), **opts)
+        tr = trace_ray_np(
+            tex, cam.position, dirs[y, x], r.lighting, (t0[y, x], t1[y, x]),
+            pixel_angle=pixel_angle(cam, SIZE), **opts,
+        )  # fmt: skip
         got = img[y, x]
         assert np.abs(tr.rgb - got[:3]).max() < 1 / 255 and abs(tr.alpha - got[3]) < 1 / 255, (
             y,
@@ -442,7 +452,10 @@ def test_hard_cameras_give_finite_images(r, small_tree, cam):
     assert img[..., 3].max() > 0.1
     dirs, t0, t1 = pixel_rays(cam, size, tex.bounds)
     for y, x in [(32, 32), (32, 10), (5, 32)]:
-        rgb, alpha = march_ray_np(tex, cam.position, dirs[y, x], r.lighting, (t0[y, x], t1[y, x]))
+        rgb, alpha = march_ray_np(
+            tex, cam.position, dirs[y, x], r.lighting, (t0[y, x], t1[y, x]),
+            pixel_angle=pixel_angle(cam, size),
+        )  # fmt: skip
         assert np.abs(np.append(rgb, alpha) - img[y, x]).max() < 1 / 255, (y, x)
 
 

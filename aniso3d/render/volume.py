@@ -94,12 +94,20 @@ DEFAULT_OPACITY = "planar"
 #: crosses a sheet within it of a voxel face counts in both voxels, never in
 #: neither (float32 puts the same point a few 1e-5 apart in the two voxels).
 SHEET_EPS = 1e-3
-#: An entry is drawn as a sheet in proportion to how much of its plane's
-#: section of the voxel it fills: ramp from 0 at the first value to 1 at the
-#: second (see :func:`sheet_share`).
-SHEET_FILL = (0.0, 0.0)
-#: ... and to the length of its mean normal (1: coplanar facets).
-SHEET_COHERENCE = (0.0, 0.0)
+#: Extra crossing tolerance per unit spread of an entry's normals (see
+#: :class:`EntrySheets`).
+SHEET_BEND = 1.0
+#: ... fading out at this spread ``1 - |n|`` (normals about 0.45 rad apart):
+#: beyond it the entry is facets of unrelated directions, not a bent surface,
+#: and its plane is a fiction that no neighbour continues.
+SHEET_BEND_MAX = 0.01
+#: An entry is a sheet at every scale in proportion to how much of its
+#: plane's section of the voxel it fills: ramp from 0 at the first value to 1
+#: at the second (see :class:`EntrySheets`).
+SHEET_FILL = (0.7, 0.95)
+#: Every entry is a sheet in proportion to its voxel's size in pixels: ramp
+#: from 0 at the first value to 1 at the second (see :func:`sheet_share`).
+SHEET_PIXELS = (0.5, 2.0)
 #: uint32 words per shading entry on the GPU (three uvec4; see volume.frag).
 ENTRY_WORDS = 12
 #: OpenGL version the shaders need (shader storage buffers).
@@ -262,38 +270,70 @@ def plane_section_area(normal: np.ndarray, offset: np.ndarray) -> np.ndarray:
     return np.where(count >= 3, area, 0.0)
 
 
-def sheet_share(fill: np.ndarray, coherence: np.ndarray) -> np.ndarray:
-    """(E,) share in [0, 1] of each entry's area drawn as a sheet (crossed once
-    by a ray) rather than as a cloud (spread through the voxel). ``fill`` (E,)
-    is the entry's area over its plane's section of the voxel; ``coherence``
-    (E,) the length of its mean normal (1 for coplanar facets)."""
-    lo, hi = SHEET_FILL
-    f = np.clip((np.asarray(fill, np.float64) - lo) / max(hi - lo, 1e-9), 0.0, 1.0)
-    lo, hi = SHEET_COHERENCE
-    c = np.clip((np.asarray(coherence, np.float64) - lo) / max(hi - lo, 1e-9), 0.0, 1.0)
-    return f * c
+def _ramp(x: np.ndarray, ends: tuple[float, float]) -> np.ndarray:
+    """0 below ``ends[0]``, 1 above ``ends[1]``, linear between."""
+    lo, hi = ends
+    return np.clip((np.asarray(x, dtype=np.float64) - lo) / max(hi - lo, 1e-9), 0.0, 1.0)
+
+
+def sheet_share(static: np.ndarray, voxel_pixels: np.ndarray) -> np.ndarray:
+    """Share in [0, 1] of an entry's sheet area drawn as a sheet, from its
+    static share (:attr:`EntrySheets.share`) and the size of its voxel in
+    pixels where the ray crosses it (inf: a point sample). Mirrors volume.frag.
+
+    A sheet that fills its voxel's section continues into its neighbours
+    and is crossed exactly once by any ray: a sheet at every scale. A partial
+    one (a leaf, a surface's edge) is crossed or missed, all or nothing,
+    which a single ray per pixel samples well only where the voxel spans
+    several pixels (:data:`SHEET_PIXELS`); smaller, its cloud (coverage
+    spread through the voxel) is the filtered average."""
+    zoom = _ramp(voxel_pixels, SHEET_PIXELS)
+    return 1.0 - (1.0 - np.asarray(static, dtype=np.float64)) * (1.0 - zoom)
 
 
 @dataclass(frozen=True)
 class EntrySheets:
     """Each shading entry of a texture read as a sheet: the plane through its
     facets' centroid normal to their mean normal, in voxel-local grid
-    coordinates (the voxel is the unit cube).
+    coordinates (the voxel is the unit cube). All (E,) but ``normal`` (E, 3).
 
     Attributes:
-        normal: (E, 3) unit normal (0 where the facets have no mean direction).
-        offset: (E,) the plane ``normal . x = offset``.
-        section: (E,) area of the plane's section of the voxel, h^2.
-        fill: (E,) coverage of that section by the sheet part, in [0, 1].
-        area: (E,) facet area drawn as a sheet, h^2 (``fill * section``); the
-            rest, ``entry_area - area``, is drawn as a cloud.
+        normal: unit normal (0 where the facets have no mean direction).
+        offset: the plane ``normal . x = offset``.
+        section: area of the plane's section of the voxel, h^2.
+        area: facet area that can be drawn as a sheet, ``min(A, section)``
+            (h^2); the rest of the entry's area A is always cloud.
+        fill: ``area / section``, the coverage of the section, in [0, 1].
+        share: static share of ``area`` drawn as a sheet at every scale:
+            :data:`SHEET_FILL` ramp of how well the entry, or its voxel's
+            facets together (a bent surface whose facets fall on several
+            sample directions), fill their plane's section.
+        slack: crossing tolerance, voxel units along the normal:
+            :data:`SHEET_EPS` plus :data:`SHEET_BEND` times the normals'
+            spread ``sqrt(1 - |n|)`` (fading out by :data:`SHEET_BEND_MAX`):
+            a bent surface's planes step where they meet at a voxel face, by
+            about its bend over the voxel, and a ray must not slip through.
     """
 
     normal: np.ndarray
     offset: np.ndarray
     section: np.ndarray
-    fill: np.ndarray
     area: np.ndarray
+    fill: np.ndarray
+    share: np.ndarray
+    slack: np.ndarray
+
+
+def _sections(normal: np.ndarray, local: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unit normals, offsets and section areas of the planes through the
+    voxel-local points ``local`` (N, 3) normal to ``normal`` (N, 3, any
+    length; 0: no plane, section 0)."""
+    length = np.linalg.norm(normal, axis=1)
+    ok = length > 1e-6
+    nh = np.where(ok[:, None], normal / np.where(ok, length, 1.0)[:, None], 0.0)
+    # The outer cells are unbounded (clip.py): keep the plane on the cube.
+    d = np.clip(np.sum(nh * local, axis=1), np.minimum(nh, 0).sum(1), np.maximum(nh, 0).sum(1))
+    return nh, d, np.where(ok, plane_section_area(nh, d), 0.0)
 
 
 def entry_sheets(texture: AnisoTexture) -> EntrySheets:
@@ -301,23 +341,28 @@ def entry_sheets(texture: AnisoTexture) -> EntrySheets:
     from what every texture stores (entry area, mean normal, centroid), so
     old files and every pyramid level have them."""
     n = np.asarray(texture.entry_normal, dtype=np.float64)
-    ell = np.linalg.norm(n, axis=1)
-    coherent = ell > 1e-6
-    nh = np.where(coherent[:, None], n / np.where(coherent, ell, 1.0)[:, None], 0.0)
-    h = float(texture.voxel_size)
-    cell = np.asarray(texture.coords, dtype=np.float64)[texture.entry_voxel]
-    local = (np.asarray(texture.entry_centroid, np.float64) - np.asarray(texture.origin, np.float64)) / h - cell
-    # The outer cells are unbounded (clip.py): keep the plane on the cube.
-    d = np.clip(np.sum(nh * local, axis=1), np.minimum(nh, 0).sum(1), np.maximum(nh, 0).sum(1))
-    section = np.where(coherent, plane_section_area(nh, d), 0.0)
     area = np.asarray(texture.entry_area, dtype=np.float64)
+    h = float(texture.voxel_size)
+    owner = texture.entry_voxel
+    cell = np.asarray(texture.coords, dtype=np.float64)[owner]
+    local = (np.asarray(texture.entry_centroid, np.float64) - np.asarray(texture.origin, np.float64)) / h - cell
+    nh, d, section = _sections(n, local)
+    # The voxel's facets together: net area along their mean normal over the
+    # section of the plane through their centroid.
+    V = texture.n_voxels
+    net = np.stack([np.bincount(owner, area * n[:, i], minlength=V) for i in range(3)], axis=1)
+    total = np.maximum(np.bincount(owner, area, minlength=V), 1e-300)
+    centre = np.stack([np.bincount(owner, area * local[:, i], minlength=V) for i in range(3)], 1) / total[:, None]
+    _, _, voxel_section = _sections(net, centre)
     with np.errstate(divide="ignore", invalid="ignore"):
-        raw = np.where(section > 1e-9, area / section, 0.0)
-    share = np.where(section > 1e-9, sheet_share(raw, ell), 0.0)
-    sheet_area = share * np.minimum(area, section)
-    with np.errstate(divide="ignore", invalid="ignore"):
+        own = np.where(section > 1e-9, area / section, 0.0)
+        together = np.where(voxel_section > 1e-9, np.linalg.norm(net, axis=1) / voxel_section, 0.0)
+        sheet_area = np.where(section > 1e-9, np.minimum(area, section), 0.0)
         fill = np.where(section > 1e-9, sheet_area / section, 0.0)
-    return EntrySheets(nh, d, section, np.clip(fill, 0.0, 1.0), sheet_area)
+    share = _ramp(np.maximum(own, together[owner]), SHEET_FILL)
+    spread = np.clip(1.0 - np.linalg.norm(n, axis=1), 0.0, 1.0)
+    slack = SHEET_EPS + SHEET_BEND * np.sqrt(spread) * np.clip(1.0 - spread / SHEET_BEND_MAX, 0.0, 1.0)
+    return EntrySheets(nh, d, section, sheet_area, np.clip(fill, 0.0, 1.0), share, slack)
 
 
 @dataclass
@@ -351,16 +396,19 @@ def sheet_terms(
     chords: np.ndarray,
     opacity: str = DEFAULT_OPACITY,
     normal: str = "mean",
+    voxel_pixels: np.ndarray | float = np.inf,
     sheets: EntrySheets | None = None,
 ) -> SheetTerms:
     """:class:`SheetTerms` of ``voxels`` (V,) crossed along the unit vector
     ``w`` from the voxel-local points ``x_in`` (V, 3; the voxel is the unit
-    cube) over ``chords`` (V,) grid units. Mirrors composite() in volume.frag.
+    cube) over ``chords`` (V,) grid units, each voxel spanning
+    ``voxel_pixels`` (V,) pixels there (see :func:`sheet_share`). Mirrors
+    composite() in volume.frag.
 
     A ray crosses a sheet's plane inside the voxel when the plane's signed
-    distance changes sign (within :data:`SHEET_EPS`) between where it enters
-    and leaves: a plane cut into many voxels is crossed in exactly one of
-    them, whatever the angle."""
+    distance changes sign (within the sheet's slack) between where the ray
+    enters and leaves: a plane cut into many voxels is crossed in exactly one
+    of them, whatever the angle."""
     w = np.asarray(w, dtype=np.float64)
     w = w / np.linalg.norm(w)
     voxels = np.asarray(voxels, dtype=np.int64)
@@ -369,7 +417,8 @@ def sheet_terms(
     rows, owner = _entry_rows(texture, voxels)
     c, n = _entry_colors(texture, w, lighting, normal, rows)
     area = np.asarray(texture.entry_area, dtype=np.float64)[rows]
-    nh, a_s = sh.normal[rows], sh.area[rows]
+    share = sheet_share(sh.share[rows], np.broadcast_to(voxel_pixels, (V,))[owner])
+    nh, a_s, fill = sh.normal[rows], share * sh.area[rows], share * sh.fill[rows]
     nw = nh @ w
     projected = np.bincount(owner, a_s * np.abs(nw), minlength=V)
     if opacity == "split":
@@ -378,8 +427,9 @@ def sheet_terms(
     else:
         s_in = np.einsum("ek,ek->e", nh, np.asarray(x_in, np.float64)[owner]) - sh.offset[rows]
         s_out = s_in + nw * np.asarray(chords, np.float64)[owner]
-        hit = (np.minimum(s_in, s_out) <= SHEET_EPS) & (np.maximum(s_in, s_out) >= -SHEET_EPS)
-        ws = np.where(hit & (a_s > 0), sh.fill[rows], 0.0)
+        slack = sh.slack[rows]
+        hit = (np.minimum(s_in, s_out) <= slack) & (np.maximum(s_in, s_out) >= -slack)
+        ws = np.where(hit & (a_s > 0), fill, 0.0)
         with np.errstate(divide="ignore", invalid="ignore"):
             t_hit = np.where(nw != 0, -s_in / nw, 0.0)
         t_hit = np.clip(t_hit, 0.0, np.asarray(chords, np.float64)[owner])
@@ -396,7 +446,6 @@ def sheet_terms(
         _weighted_colors(owner, V, c, all_w, area),
     )
     return SheetTerms(projected, crossed, t_cross, sheet_color, cloud_color)
-
 
 
 # ------------------------------------------------------------ the NumPy ray
@@ -424,15 +473,20 @@ def march_ray_np(
     density: str = "facet",
     normal: str = "mean",
     opacity: str = DEFAULT_OPACITY,
+    pixel_angle: float = 0.0,
 ) -> tuple[np.ndarray, float]:
     """One ray through ``texture``, the slow twin of a GPU pixel.
 
-    ``origin`` (3,) and ``direction`` (3,) are world; ``t_range`` limits the
-    ray parameter (world distance along the unit direction; the renderer
-    passes the near and far planes). Returns the pixel's (3,) RGB in [0, 1],
-    ``C + T * background``, and its alpha ``1 - T``.
+    ``origin`` (3,), the eye, and ``direction`` (3,) are world; ``t_range``
+    limits the ray parameter (world distance along the unit direction; the
+    renderer passes the near and far planes). ``pixel_angle`` is the angle a
+    pixel spans, radians (the renderer's ``2 tan(fov / 2) / height``): a
+    voxel at distance r from the eye spans ``h / (r pixel_angle)`` pixels,
+    which the sheet law "planar" reads (:func:`sheet_share`); 0 stands for a
+    point sample. Returns the pixel's (3,) RGB in [0, 1], ``C + T *
+    background``, and its alpha ``1 - T``.
     """
-    tr = trace_ray_np(texture, origin, direction, lighting, t_range, density, normal, opacity)
+    tr = trace_ray_np(texture, origin, direction, lighting, t_range, density, normal, opacity, pixel_angle)
     return tr.rgb, tr.alpha
 
 
@@ -445,6 +499,7 @@ def trace_ray_np(
     density: str = "facet",
     normal: str = "mean",
     opacity: str = DEFAULT_OPACITY,
+    pixel_angle: float = 0.0,
 ) -> RayTrace:
     """:func:`march_ray_np` with what the ray met (see :class:`RayTrace`)."""
     _check_choice(density, DENSITY_MODES, "density reading")
@@ -510,7 +565,11 @@ def trace_ray_np(
         t_in = np.array([hv[1] for hv in hits])
         chords = np.array([hv[2] for hv in hits])
         x_in = o + d * t_in[:, None] - np.array([hv[3] for hv in hits], dtype=np.float64)
-        st = sheet_terms(texture, d, lighting, vox, x_in, chords, opacity, normal)
+        # A voxel's size in pixels where the ray crosses its middle (t is in
+        # voxels from the eye).
+        with np.errstate(divide="ignore"):
+            pixels = 1.0 / ((t_in + 0.5 * chords) * float(pixel_angle))
+        st = sheet_terms(texture, d, lighting, vox, x_in, chords, opacity, normal, pixels)
     C, T = np.zeros(3), 1.0
     tau_s, T_f = 0.0, 1.0  # "split": the sheets' linear depth, the cloud's transmittance
     for k, ((v, ti, chord, _), D, col) in enumerate(zip(hits, dens, cols, strict=True)):
@@ -533,8 +592,9 @@ def trace_ray_np(
                 T_f *= keep_f
                 t_after = max(0.0, 1.0 - tau_s) * T_f
             else:
+                # Sheet and cloud share the facets: their coverages add.
                 a_s = min(st.crossed[k], 1.0)
-                t_after = T * (1.0 - a_s) * keep_f
+                t_after = T * max(0.0, keep_f - a_s)
             seg = T - t_after
             a_s, a_f = min(a_s, 1.0), 1.0 - keep_f
             if a_s + a_f > 0.0:
@@ -566,10 +626,10 @@ def _t50_offset(
         return (T - 0.5) / sigma
     if opacity == "split":
         return chord * (T - 0.5) / seg
-    behind = T * (1.0 - min(st.crossed[k], 1.0))  # after the sheets alone
-    if behind <= 0.5:
+    a_s = min(st.crossed[k], 1.0)
+    if T * (1.0 - a_s) <= 0.5:  # the sheets alone take it there
         return float(st.t_cross[k])
-    return float(np.log(behind / 0.5) / sigma)
+    return float(-np.log(0.5 / T + a_s) / sigma)
 
 
 # --------------------------------------------------------------- GPU layout
@@ -635,8 +695,10 @@ def pack_volume(texture: AnisoTexture) -> dict[str, np.ndarray]:
     entries[:, 6] = np.asarray(texture.entry_shininess, dtype=np.float32).view(np.uint32)
     entries[:, 7] = np.asarray(texture.entry_direction, dtype=np.uint32)
     entries[:, 8] = sheets.offset.astype(np.float32).view(np.uint32)
-    entries[:, 9] = sheets.fill.astype(np.float32).view(np.uint32)
+    fill_share = np.stack([sheets.fill, sheets.share], axis=1).astype(np.float16)
+    entries[:, 9] = fill_share.view(np.uint32).ravel()
     entries[:, 10] = sheets.area.astype(np.float32).view(np.uint32)
+    entries[:, 11] = sheets.slack.astype(np.float32).view(np.uint32)
 
     directions = np.zeros((K, 4), dtype=np.float32)
     directions[:, :3] = texture.directions
@@ -706,7 +768,6 @@ class VolumeRenderer:
             "ALPHA_MAX": float(np.float32(ALPHA_MAX)),
             "T_MIN": T_MIN,
             "BIG": _BIG,
-            "SHEET_EPS": SHEET_EPS,
         }
         self.prog = gl.program("volume.vert", "volume.frag", defines=defines)
         self.vao = gl.track(ctx.vertex_array(self.prog, []))
@@ -827,6 +888,8 @@ class VolumeRenderer:
                 "u_density_mode": DENSITY_MODES.index(density),
                 "u_normal_mode": NORMAL_MODES.index(normal),
                 "u_opacity_mode": OPACITY_MODES.index(opacity),
+                "u_pixel_angle": 2.0 * t / float(view.size[1]),
+                "u_sheet_pixels": tuple(float(x) for x in SHEET_PIXELS),
                 "u_background": tuple(float(c) for c in view.lighting.background),
             },
         )
