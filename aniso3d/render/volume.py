@@ -156,17 +156,22 @@ def _entry_rows(texture: AnisoTexture, voxels: np.ndarray) -> tuple[np.ndarray, 
 
 
 def density_along(
-    texture: AnisoTexture, w: np.ndarray, mode: str = "facet", voxels: np.ndarray | None = None
-) -> np.ndarray:
+    texture: AnisoTexture, w: np.ndarray, mode: str = "facet", voxels: np.ndarray | None = None,
+    stored: bool = False,
+) -> np.ndarray:  # fmt: skip
     """(V,) projected facet area ``D_v(w)`` (units of h^2) of ``voxels`` (default:
     all) seen along the unit vector ``w``, read from the density sphere as
-    ``mode`` says (see the module docstring). Never negative."""
+    ``mode`` says (see the module docstring). Never negative. ``stored``
+    reads the samples as the GPU stores them (float16), as the NumPy ray does:
+    what the sheets leave of D is a small difference where they take most."""
     _check_choice(mode, DENSITY_MODES, "density reading")
     w = np.asarray(w, dtype=np.float64)
     w = w / np.linalg.norm(w)
     voxels = np.arange(texture.n_voxels) if voxels is None else np.asarray(voxels, dtype=np.int64)
     idx, wt = direction_weights(texture.directions, w, mode)
     dens = np.asarray(texture.density)[voxels][:, idx]
+    if stored:
+        dens = np.minimum(dens, 6e4).astype(np.float16).astype(np.float64)
     if mode != "facet":
         return np.maximum(dens @ wt, 0.0)
     rows, owner = _entry_rows(texture, voxels)
@@ -303,11 +308,12 @@ class EntrySheets:
         section: area of the plane's section of the voxel, h^2.
         area: facet area that can be drawn as a sheet, ``min(A, section)``
             (h^2); the rest of the entry's area A is always cloud.
-        fill: ``area / section``, the coverage of the section, in [0, 1].
+        fill: ``area / section``, the coverage of the section, in [0, 1]
+            (to float16, as the GPU stores it).
         share: static share of ``area`` drawn as a sheet at every scale:
             :data:`SHEET_FILL` ramp of how well the entry, or its voxel's
             facets together (a bent surface whose facets fall on several
-            sample directions), fill their plane's section.
+            sample directions), fill their plane's section (to float16).
         slack: crossing tolerance, voxel units along the normal:
             :data:`SHEET_EPS` plus :data:`SHEET_BEND` times the normals'
             spread ``sqrt(1 - |n|)`` (fading out by :data:`SHEET_BEND_MAX`):
@@ -336,20 +342,27 @@ def _sections(normal: np.ndarray, local: np.ndarray) -> tuple[np.ndarray, np.nda
     return nh, d, np.where(ok, plane_section_area(nh, d), 0.0)
 
 
-def entry_sheets(texture: AnisoTexture) -> EntrySheets:
+def entry_sheets(texture: AnisoTexture, voxels: np.ndarray | None = None) -> EntrySheets:
     """The sheets of ``texture``'s entries (see :class:`EntrySheets`), derived
     from what every texture stores (entry area, mean normal, centroid), so
-    old files and every pyramid level have them."""
-    n = np.asarray(texture.entry_normal, dtype=np.float64)
-    area = np.asarray(texture.entry_area, dtype=np.float64)
+    old files and every pyramid level have them. With ``voxels``, only their
+    entries, voxel by voxel in the given order."""
+    if voxels is None:
+        rows, owner = np.arange(texture.n_entries), texture.entry_voxel
+        V = texture.n_voxels
+    else:
+        voxels = np.asarray(voxels, dtype=np.int64)
+        rows, owner = _entry_rows(texture, voxels)
+        V = len(voxels)
+    n = np.asarray(texture.entry_normal, dtype=np.float64)[rows]
+    area = np.asarray(texture.entry_area, dtype=np.float64)[rows]
     h = float(texture.voxel_size)
-    owner = texture.entry_voxel
-    cell = np.asarray(texture.coords, dtype=np.float64)[owner]
-    local = (np.asarray(texture.entry_centroid, np.float64) - np.asarray(texture.origin, np.float64)) / h - cell
+    cell = np.asarray(texture.coords, dtype=np.float64)[texture.entry_voxel[rows]]
+    centroid = np.asarray(texture.entry_centroid, np.float64)[rows]
+    local = (centroid - np.asarray(texture.origin, np.float64)) / h - cell
     nh, d, section = _sections(n, local)
     # The voxel's facets together: net area along their mean normal over the
     # section of the plane through their centroid.
-    V = texture.n_voxels
     net = np.stack([np.bincount(owner, area * n[:, i], minlength=V) for i in range(3)], axis=1)
     total = np.maximum(np.bincount(owner, area, minlength=V), 1e-300)
     centre = np.stack([np.bincount(owner, area * local[:, i], minlength=V) for i in range(3)], 1) / total[:, None]
@@ -362,7 +375,11 @@ def entry_sheets(texture: AnisoTexture) -> EntrySheets:
     share = _ramp(np.maximum(own, together[owner]), SHEET_FILL)
     spread = np.clip(1.0 - np.linalg.norm(n, axis=1), 0.0, 1.0)
     slack = SHEET_EPS + SHEET_BEND * np.sqrt(spread) * np.clip(1.0 - spread / SHEET_BEND_MAX, 0.0, 1.0)
-    return EntrySheets(nh, d, section, sheet_area, np.clip(fill, 0.0, 1.0), share, slack)
+    # Fill and share as the GPU stores them (float16): where the sheets bring
+    # a ray's transmittance to about 0.5, its depth hangs on the last digit.
+    fill = np.clip(fill, 0.0, 1.0).astype(np.float16).astype(np.float64)
+    share = share.astype(np.float16).astype(np.float64)
+    return EntrySheets(nh, d, section, sheet_area, fill, share, slack)
 
 
 @dataclass
@@ -413,21 +430,24 @@ def sheet_terms(
     w = w / np.linalg.norm(w)
     voxels = np.asarray(voxels, dtype=np.int64)
     V = len(voxels)
-    sh = entry_sheets(texture) if sheets is None else sheets
     rows, owner = _entry_rows(texture, voxels)
+    if sheets is None:
+        sh, at = entry_sheets(texture, voxels), np.arange(len(rows))
+    else:
+        sh, at = sheets, rows
     c, n = _entry_colors(texture, w, lighting, normal, rows)
     area = np.asarray(texture.entry_area, dtype=np.float64)[rows]
-    share = sheet_share(sh.share[rows], np.broadcast_to(voxel_pixels, (V,))[owner])
-    nh, a_s, fill = sh.normal[rows], share * sh.area[rows], share * sh.fill[rows]
+    share = sheet_share(sh.share[at], np.broadcast_to(voxel_pixels, (V,))[owner])
+    nh, a_s, fill = sh.normal[at], share * sh.area[at], share * sh.fill[at]
     nw = nh @ w
     projected = np.bincount(owner, a_s * np.abs(nw), minlength=V)
     if opacity == "split":
         ws = a_s * np.abs(nw)
         t_hit = np.zeros(len(rows))
     else:
-        s_in = np.einsum("ek,ek->e", nh, np.asarray(x_in, np.float64)[owner]) - sh.offset[rows]
+        s_in = np.einsum("ek,ek->e", nh, np.asarray(x_in, np.float64)[owner]) - sh.offset[at]
         s_out = s_in + nw * np.asarray(chords, np.float64)[owner]
-        slack = sh.slack[rows]
+        slack = sh.slack[at]
         hit = (np.minimum(s_in, s_out) <= slack) & (np.maximum(s_in, s_out) >= -slack)
         ws = np.where(hit & (a_s > 0), fill, 0.0)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -558,7 +578,7 @@ def trace_ray_np(
 
     P = float(np.abs(d).sum())
     vox = np.array([hv[0] for hv in hits], dtype=np.int64)
-    dens = density_along(texture, d, density, vox) if len(vox) else np.zeros(0)
+    dens = density_along(texture, d, density, vox, stored=True) if len(vox) else np.zeros(0)
     cols = voxel_colors(texture, d, lighting, normal, vox) if len(vox) else np.zeros((0, 3))
     st = None
     if opacity in ("split", "planar") and len(vox):
