@@ -104,15 +104,16 @@ def leaf_cloud(n_leaves: int, leaf: float, seed: int = 0) -> Mesh:
 
 
 def test_plane_section_area_closed_forms():
-    """Sections of the unit cube: a face-parallel plane 1, the diagonal plane
-    x + y = 1 sqrt(2), the corner triangle x + y + z = 1 sqrt(3)/2, the
-    middle hexagon x + y + z = 3/2 3 sqrt(3)/4; 0 off the cube."""
+    """Sections of the unit cube: a face-parallel plane 1 (on either face
+    too), the diagonal plane x + y = 1 sqrt(2), the corner triangle x + y +
+    z = 1 sqrt(3)/2, the middle hexagon x + y + z = 3/2 3 sqrt(3)/4, a plane
+    -x - y = -1/2 (negative components) a rectangle sqrt(2)/2 by 1; 0 off the
+    cube or touching an edge only."""
     s3, s2 = np.sqrt(3), np.sqrt(2)
-    n = np.array([[0, 0, 1], [0, 0, 1], [1, 1, 0], [1, 1, 1], [1, 1, 1], [1, 0, 0]]) / np.array(
-        [[1], [1], [s2], [s3], [s3], [1]]
-    )
-    d = np.array([0.5, 0.0, 1 / s2, 1 / s3, 1.5 / s3, -0.1])
-    want = [1.0, 1.0, s2, s3 / 2, 3 * s3 / 4, 0.0]
+    n = np.array([[0, 0, 1], [0, 0, 1], [0, 0, -1], [1, 1, 0], [1, 1, 1], [1, 1, 1], [-1, -1, 0], [1, 0, 0],
+                  [1, 1, 0]]) / np.array([[1], [1], [1], [s2], [s3], [s3], [s2], [1], [s2]])  # fmt: skip
+    d = np.array([0.5, 0.0, -1.0, 1 / s2, 1 / s3, 1.5 / s3, -0.5 / s2, -0.1, 0.0])
+    want = [1.0, 1.0, 1.0, s2, s3 / 2, 3 * s3 / 4, s2 / 2, 0.0, 0.0]
     np.testing.assert_allclose(plane_section_area(n, d), want, atol=1e-12)
 
 

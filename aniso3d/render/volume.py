@@ -11,21 +11,38 @@ A voxel seen along the unit ray direction w (METHOD.md "Reference
 conventions"), with ``P(w) = |wx| + |wy| + |wz|`` and h the voxel edge:
 
 - coverage over the mean chord ``h / P(w)`` is ``alpha = min(1, D_v(w) / P(w))``;
-- over a chord c, ``opacity="exponential"`` (default; Beer-Lambert with
+- over a chord c, ``opacity="exponential"`` (Beer-Lambert with
   ``sigma = -ln(1 - alpha) P / h``, alpha capped at :data:`ALPHA_MAX` so it
   stays finite) multiplies the transmittance T by ``exp(-sigma c)``:
   facets at independent random places. ``opacity="linear"`` subtracts
   ``min(D, P) c / h`` from T (never below 0): coverage adds up along the ray.
-  Both give ``alpha`` over the mean chord. They differ across voxels: by
-  Crofton's formula a ray crossing a plane's layer of voxels adds up exactly
-  one crossing, so "linear" draws a single plane opaque from any angle, while
-  "exponential" lets ``(x / (1 + x))^(1 + x)`` through, with
+  Both give ``alpha`` over the mean chord. They differ across voxels, and
+  neither is right for both kinds of object (docs/coverage.md): a plane's
+  facets are perfectly correlated along a ray, so "exponential" lets
+  ``(x / (1 + x))^(1 + x)`` of the background through an opaque plane, with
   ``x = (|wx| + |wy|) / |wz|`` in the plane's frame (0.29 at 60 degrees off
-  its normal, 0.05 at 4 degrees). For foliage, the paper's object, leaves
-  really are scattered and the exponential law is the closer one (default
-  tree at 128^3: coverage 1.011 x the polygons' against 1.082, alpha RMSE
-  0.031 against 0.050); for solid surfaces "linear" is (quad at 60 degrees:
-  coverage 1.00 against 0.73);
+  its normal); "linear" adds up one crossing of a plane on average over the
+  rays (Crofton), exactly only for a plane along the grid axes, and leaves
+  stripes along the voxel edges of a tilted one; and it over-covers a cloud
+  of leaves (+0.16 to +0.25 of alpha);
+- ``opacity="planar"`` (default, :data:`DEFAULT_OPACITY`) reads each shading
+  entry as a *sheet*, the plane through its facets' centroid normal to their
+  mean normal (:func:`entry_sheets`, derived from what every texture
+  stores), covering a fraction ``fill`` of the plane's section of the voxel.
+  A ray counts a sheet where it crosses its plane inside the voxel (the
+  signed distance changes sign between the ray's entry and exit): a plane
+  cut into many voxels is crossed in exactly one of them, so it is opaque
+  from every angle, and a leaf cut into several is counted once. What a
+  sheet does not take (:func:`sheet_share`) is a cloud, Beer-Lambert on
+  what the sheets leave of D; in a voxel the two coverages add (they are
+  the same facets). An entry filling its section (a surface continuing into
+  the neighbours) is a sheet at every scale; a partial one (a leaf, an
+  edge) is crossed all or nothing, which one ray per pixel samples well only
+  on voxels spanning a pixel or more, so below that it fades into its cloud,
+  the filtered average (:data:`SHEET_PIXELS`). ``opacity="split"`` is the
+  candidate that keeps the chord: sheets add up linearly along the ray (T =
+  ``max(0, 1 - tau_s) exp(-tau_f)``); measured, it keeps the stripes of
+  "linear" on tilted planes;
 - colour: the shaded colours of its shading entries (``shade()`` of
   ``lighting.glsl``; the view vector is -w, exact for every point of the
   ray) weighted by ``A_e |n_e . w|``, ``n_e`` the entry's mean facet normal
@@ -97,7 +114,7 @@ SHEET_EPS = 1e-3
 #: Extra crossing tolerance per unit spread of an entry's normals (see
 #: :class:`EntrySheets`).
 SHEET_BEND = 1.0
-#: ... fading out at this spread ``1 - |n|`` (normals about 0.45 rad apart):
+#: ... fading out at this spread ``1 - |n|`` (normals some 0.3-0.5 rad apart):
 #: beyond it the entry is facets of unrelated directions, not a bent surface,
 #: and its plane is a fiction that no neighbour continues.
 SHEET_BEND_MAX = 0.01
@@ -238,41 +255,33 @@ def _weighted_colors(
 
 # ------------------------------------------------------------- the sheets
 
-#: The unit cube's corners and its 12 edges (pairs of corner indices).
-_CORNERS = np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], dtype=np.float64)
-_EDGES = np.array([(a, a | 1 << k) for a in range(8) for k in range(3) if not a >> k & 1])
-
-
 def plane_section_area(normal: np.ndarray, offset: np.ndarray) -> np.ndarray:
     """(N,) area of the unit cube's section ``{x in [0, 1]^3 : n . x = d}`` by
-    the planes of unit normals ``normal`` (N, 3) and offsets ``offset`` (N,):
-    the polygon where each plane crosses the cube's 12 edges, fanned from its
-    mean vertex. 0 where a plane misses the cube. Units: cube faces (h^2)."""
+    the planes of unit normals ``normal`` (N, 3) and offsets ``offset`` (N,),
+    in cube faces (h^2); 0 where a plane misses the cube.
+
+    For U uniform in the cube, ``n . U`` has density ``area / |n|`` at d: the
+    sum of three uniforms on ``[0, |n_i|]`` (shifted by the negative
+    components). The two narrower ones sum to a trapezoid (CDF F, closed
+    form); the widest, c >= 1/sqrt(3), spreads it: ``(F(y) - F(y - c)) / c``,
+    never a division by a small width. A plane on a face counts it whole."""
     n = np.asarray(normal, dtype=np.float64).reshape(-1, 3)
     d = np.asarray(offset, dtype=np.float64).reshape(-1)
-    s = n @ _CORNERS.T - d[:, None]  # (N, 8) signed distances of the corners
-    sa, sb = s[:, _EDGES[:, 0]], s[:, _EDGES[:, 1]]
-    cross = ((sa <= 0) & (sb >= 0) | (sa >= 0) & (sb <= 0)) & (sa != sb)
+    a, b, c = np.sort(np.abs(n), axis=1).T
+    y = d - np.minimum(n, 0.0).sum(axis=1)
+
+    def trapezoid_cdf(x: np.ndarray) -> np.ndarray:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rise = x * x / (2.0 * a * b)
+            flat = (x - 0.5 * a) / b
+            fall = 1.0 - (a + b - x) ** 2 / (2.0 * a * b)
+        return np.where(x <= 0, 0.0, np.where(x < a, rise, np.where(x < b, flat, np.where(x < a + b, fall, 1.0))))
+
     with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(cross, sa / (sa - sb), 0.0)
-    a, b = _CORNERS[_EDGES[:, 0]], _CORNERS[_EDGES[:, 1]]
-    pts = a[None] + t[..., None] * (b - a)[None]  # (N, 12, 3)
-    count = cross.sum(axis=1)
-    centre = (pts * cross[..., None]).sum(axis=1) / np.maximum(count, 1)[:, None]
-    helper = np.where((np.abs(n[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-    u = np.cross(n, helper)
-    u /= np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-300)
-    v = np.cross(n, u)
-    rel = pts - centre[:, None]
-    ang = np.arctan2(np.einsum("nek,nk->ne", rel, v), np.einsum("nek,nk->ne", rel, u))
-    order = np.argsort(np.where(cross, ang, np.inf), axis=1)
-    rel = np.take_along_axis(rel, order[..., None], axis=1)
-    i = np.arange(len(_EDGES))[None]
-    nxt = np.where(i + 1 < count[:, None], i + 1, 0)
-    rel_next = np.take_along_axis(rel, nxt[..., None], axis=1)
-    tri = np.einsum("nek,nk->ne", np.cross(rel, rel_next), n)
-    area = 0.5 * np.abs(np.where(i < count[:, None], tri, 0.0)).sum(axis=1)
-    return np.where(count >= 3, area, 0.0)
+        area = (trapezoid_cdf(y) - trapezoid_cdf(y - c)) / c
+    # Along an axis the two narrow widths are 0: a point mass, the face whole.
+    on_axis = a + b == 0
+    return np.where(on_axis, ((y >= 0) & (y <= c)).astype(np.float64), area)
 
 
 def _ramp(x: np.ndarray, ends: tuple[float, float]) -> np.ndarray:
@@ -862,8 +871,8 @@ class VolumeRenderer:
         Options: ``step`` "dda" (exact voxel chords; the only stepping),
         ``density`` "facet" | "kernel" | "nearest" (how the density sphere is
         read), ``normal`` "mean" | "sample" (the shading normal of an entry),
-        ``opacity`` "exponential" | "linear" (how coverage adds up along the
-        ray; see the module docstring). A pyramid upload
+        ``opacity`` "planar" (default) | "exponential" | "linear" | "split"
+        (how coverage adds up along the ray; see the module docstring). A pyramid upload
         (:class:`GPULodVolume`) draws the level :func:`~aniso3d.render.lod.volume_level`
         picks for ``pixel_error`` (framebuffer pixels, default 1).
         """
