@@ -17,7 +17,7 @@ is the disc of 0.8 times the crown's projected radius; anything else is
 every pixel the truth covers at all.
 
     .venv/bin/python demos/bench_coverage.py [--scenes quad tilted cube sphere
-        leaves tree] [--models exponential linear split planar] [--size 256]
+        leaves tree] [--models exponential linear split planar ...] [--size 256]
         [--json out.json]
 
 A model ``planar@fill=0.5:0.9,pixels=1:3`` draws "planar" with those
@@ -296,7 +296,7 @@ def measure(r: Renderer, case: Case, models: list[Model], size: int, textures: d
 
 
 def print_table(rows: list[dict]) -> None:
-    head = f"{'scene':8s} {'case':22s} {'model':16s} {'vox px':>6s} {'truth':>6s} {'cover':>6s} " \
+    head = f"{'scene':8s} {'case':22s} {'model':22s} {'vox px':>6s} {'truth':>6s} {'cover':>6s} " \
            f"{'err':>7s} {'min':>6s} {'a-rmse':>7s} {'psnr':>6s}"  # fmt: skip
     print(head)
     print("-" * len(head))
@@ -306,7 +306,7 @@ def print_table(rows: list[dict]) -> None:
             print()
         last = (row["scene"], row["case"])
         print(
-            f"{row['scene']:8s} {row['case']:22s} {row['model']:16s} {row['voxel_px']:6.1f} "
+            f"{row['scene']:8s} {row['case']:22s} {row['model']:22s} {row['voxel_px']:6.1f} "
             f"{row['truth']:6.3f} {row['cover']:6.3f} {row['err']:+7.3f} {row['min']:6.3f} "
             f"{row['alpha_rmse']:7.4f} {row['psnr']:6.2f}"
         )
@@ -314,14 +314,14 @@ def print_table(rows: list[dict]) -> None:
 
 def summary(rows: list[dict], models: list[str]) -> None:
     """Per scene and model: the mean |err|, the worst min and the mean PSNR over its cases."""
-    print(f"\n{'scene':8s} {'model':16s} {'mean|err|':>9s} {'worst min':>9s} {'mean psnr':>9s}")
+    print(f"\n{'scene':8s} {'model':22s} {'mean|err|':>9s} {'worst min':>9s} {'mean psnr':>9s}")
     for scene in dict.fromkeys(r["scene"] for r in rows):
         for m in models:
             sel = [r for r in rows if r["scene"] == scene and r["model"] == m]
             if not sel:
                 continue
             print(
-                f"{scene:8s} {m:16s} {np.mean([abs(r['err']) for r in sel]):9.3f} "
+                f"{scene:8s} {m:22s} {np.mean([abs(r['err']) for r in sel]):9.3f} "
                 f"{min(r['min'] for r in sel):9.3f} {np.mean([r['psnr'] for r in sel]):9.2f}"
             )
 
@@ -329,7 +329,11 @@ def summary(rows: list[dict], models: list[str]) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenes", nargs="+", default=list(SCENES), help="scene names (see SCENES)")
-    ap.add_argument("--models", nargs="+", default=["exponential", "linear", "split", "planar"])
+    ap.add_argument(
+        "--models", nargs="+",
+        default=["exponential", "linear", "split", "planar", "planar@fill=0:0", "planar@pixels=1e9:2e9"],
+        help="opacity laws, e.g. planar@fill=0.5:0.9,pixels=1:3 (module docstring)",
+    )  # fmt: skip
     ap.add_argument("--size", type=int, default=256, help="image side, pixels")
     ap.add_argument("--json", help="also write the rows to this file")
     args = ap.parse_args()

@@ -321,11 +321,13 @@ def clouds():
 def test_leaf_cloud_keeps_its_partial_coverage(r, clouds, leaf, scale, tmp_path):
     """Random leaves keep their partial coverage: mean alpha over the crown
     (0.8 of its projected radius) within 0.02 of the 8 x 8 supersampled
-    polygons' (about 0.70), framed (a voxel about 2 pixels here at 256^2;
-    1 at this size), close up (0.45x the distance) and far (3x). Measured at
-    256^2 (docs/coverage.md): -0.012 to +0.009. The linear law over-covers
-    (+0.16 to +0.25), the exponential one loses the correlation of a long
-    leaf's pieces along a ray (-0.07 for leaves three voxels long)."""
+    polygons' (about 0.70), framed (a voxel about 1.6 pixels at this size),
+    close up (0.45x the distance) and, for leaves up to a voxel, far (3x: a
+    voxel about half a pixel). Measured at 256^2 (docs/coverage.md): -0.012
+    to +0.009; leaves three voxels long seen from far, not required here,
+    -0.025. The linear law over-covers (+0.16 to +0.25), the exponential one
+    loses the correlation of a long leaf's pieces along a ray (-0.06 to
+    -0.07 for leaves three voxels long)."""
     mesh = clouds[leaf]
     tex = aniso3d.build_texture(mesh, 64, 16)
     cam = Camera.frame(np.array([[-1.0] * 3, [1.0] * 3]), (0.55, 0.35, 1.0), fov=30.0, distance_scale=scale)
