@@ -321,17 +321,17 @@ def clouds():
 def test_leaf_cloud_keeps_its_partial_coverage(r, clouds, leaf, scale, tmp_path):
     """Random leaves keep their partial coverage: mean alpha over the crown
     (0.8 of its projected radius) within 0.02 of the 8 x 8 supersampled
-    polygons' (about 0.70), framed (a voxel about 1.6 pixels at this size),
-    close up (0.45x the distance) and, for leaves up to a voxel, far (3x: a
-    voxel about half a pixel). Measured at 256^2 (docs/coverage.md): -0.012
-    to +0.009; leaves three voxels long seen from far, not required here,
-    -0.025. The linear law over-covers (+0.16 to +0.25), the exponential one
-    loses the correlation of a long leaf's pieces along a ray (-0.06 to
-    -0.07 for leaves three voxels long)."""
+    polygons' (about 0.70), 256^2: framed (a voxel about 2 pixels), close
+    up (0.45x the distance) and, for leaves up to a voxel, far (3x: a voxel
+    about 0.7 pixel). Measured (docs/coverage.md): -0.015 to +0.007; leaves
+    three voxels long seen from far, not required here, -0.030. The linear
+    law over-covers (+0.16 to +0.25), the exponential one loses the
+    correlation of a long leaf's pieces along a ray (-0.06 to -0.07 for
+    leaves three voxels long)."""
     mesh = clouds[leaf]
     tex = aniso3d.build_texture(mesh, 64, 16)
     cam = Camera.frame(np.array([[-1.0] * 3, [1.0] * 3]), (0.55, 0.35, 1.0), fov=30.0, distance_scale=scale)
-    size = (192, 192)
+    size = (256, 256)
     ref = r.render(mesh, cam, "mesh", ssaa=8, alpha=True, size=size).astype(np.float64) / 255.0
     img, _ = render_float(r, tex, cam, size=size)
     right = cam.basis()[0]
@@ -350,16 +350,17 @@ def test_leaf_cloud_keeps_its_partial_coverage(r, clouds, leaf, scale, tmp_path)
 
 
 @pytest.mark.gpu
-@pytest.mark.parametrize("distance", [1.0, 2.5, 6.0])
-def test_twin_agrees_on_a_partial_sheet_scene(r, clouds, distance):
+@pytest.mark.parametrize("distance, pixels", [(0.35, (3.0, 5.0)), (0.7, (1.2, 2.8)), (2.5, (0.2, 0.8))])
+def test_twin_agrees_on_a_partial_sheet_scene(r, clouds, distance, pixels):
     """The leaf cloud (leaves about a voxel: partial sheets, whose share
-    depends on the voxel's size in pixels) from near (a voxel about 2
-    pixels: sheets), mid (about 1: both) and far (under 0.5: clouds): 30
+    depends on the voxel's size in pixels) from near (a voxel over 3 pixels:
+    sheets), mid (between 1 and 3: both) and far (under 1: clouds): 30
     pixels against march_ray_np, RGB and alpha within 1/255 (float16 storage,
     float32 rays)."""
     mesh = clouds[1.0]
     tex = aniso3d.build_texture(mesh, 64, 16)
     cam = Camera.frame(tex.bounds, (0.55, 0.35, 1.0), fov=30.0, distance_scale=distance)
+    assert pixels[0] < voxel_pixels(tex, cam) < pixels[1]
     img, _ = render_float(r, tex, cam)
     dirs, t0, t1 = pixel_rays(cam, SIZE, tex.bounds)
     a = img[..., 3]

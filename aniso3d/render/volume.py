@@ -124,7 +124,7 @@ SHEET_BEND_MAX = 0.01
 SHEET_FILL = (0.7, 0.95)
 #: Every entry is a sheet in proportion to its voxel's size in pixels: ramp
 #: from 0 at the first value to 1 at the second (see :func:`sheet_share`).
-SHEET_PIXELS = (0.5, 2.0)
+SHEET_PIXELS = (1.0, 3.0)
 #: uint32 words per shading entry on the GPU (three uvec4; see volume.frag).
 ENTRY_WORDS = 12
 #: OpenGL version the shaders need (shader storage buffers).
