@@ -38,7 +38,7 @@ conventions"), with ``P(w) = |wx| + |wy| + |wz|`` and h the voxel edge:
   the same facets). An entry filling its section (a surface continuing into
   the neighbours) is a sheet at every scale; a partial one (a leaf, an
   edge) is crossed all or nothing, which one ray per pixel samples well only
-  on voxels spanning a pixel or more, so below that it fades into its cloud,
+  on voxels spanning a few pixels, so on smaller ones it fades into its cloud,
   the filtered average (:data:`SHEET_PIXELS`). ``opacity="split"`` is the
   candidate that keeps the chord: sheets add up linearly along the ray (T =
   ``max(0, 1 - tau_s) exp(-tau_f)``); measured, it keeps the stripes of
