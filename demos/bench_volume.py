@@ -77,7 +77,8 @@ def main() -> None:
             "(llvmpipe's threads run in it, so CPU time hardly depends on other load)"
         )
         for label, method, opts in [
-            ("volume, exponential (default)", "volume", {}),
+            ("volume, planar (default)", "volume", {}),
+            ("volume, exponential", "volume", {"opacity": "exponential"}),
             ("volume, linear", "volume", {"opacity": "linear"}),
             ("volume, nearest-sample density", "volume", {"density": "nearest"}),
             ("polygons (a), 1 sample/pixel", "mesh", {}),

@@ -14,22 +14,29 @@
 // near); u_shape grid cells, u_bricks brick cells; u_center_g grid centre
 // (grid coords, minimum corner at 0); u_num_dirs K; u_density_mode 0 facet /
 // 1 kernel / 2 nearest; u_normal_mode 0 mean / 1 sample; u_opacity_mode 0
-// exponential / 1 linear; u_background RGB; the lighting uniforms of
-// lighting.glsl.
-// In (SSBOs, laid out by aniso3d/render_volume.py:pack_volume):
+// exponential / 1 linear / 2 split / 3 planar; u_pixel_angle the angle a
+// pixel spans (radians, 2 tan(fov/2) / height) and u_sheet_pixels the voxel
+// sizes in pixels over which every sheet fades in (render/volume.py:
+// sheet_share); u_background RGB; the lighting uniforms of lighting.glsl.
+// In (SSBOs, laid out by aniso3d/rendering/volume.py:pack_volume):
 //   0 top[]      int, brick id of each brick cell or -1 (x fastest)
 //   1 pool[]     int, voxel index of each cell of each brick or -1
 //   2 offs[]     uint, CSR offsets of each voxel's shading entries (M + 1)
 //   3 dens[]     uint, density sphere D_v(N_p) (M x K) as float16 pairs
-//   4 ent[]      uvec4 x 2 per entry: (mean normal xyz, area) as float bits;
-//                (half2(kd.rg), half2(kd.b, ks), shininess bits, sample index)
+//   4 ent[]      uvec4 x 3 per entry: (mean normal xyz, area) as float bits;
+//                (half2(kd.rg), half2(kd.b, ks), shininess bits, sample index);
+//                the entry's sheet (render/volume.py:entry_sheets): plane
+//                offset d as float bits (the plane n/|n| . x = d in
+//                voxel-local coordinates, the voxel being the unit cube),
+//                half2(fill, static share), sheet area and crossing slack as
+//                float bits
 //   5 dirs[]     vec4, the K sample directions N_p (xyz)
 // Out: f_color = (C + T * background, 1 - T), C the premultiplied colour and
 // T the transmittance left; gl_FragDepth where 1 - T first reaches 0.5 (1.0
 // if it never does). Rays that miss the grid are discarded.
 #include "lighting.glsl"
 
-// Injected by render_volume.py: BRICK (brick edge in voxels), ALPHA_MAX
+// Injected by render/volume.py: BRICK (brick edge in voxels), ALPHA_MAX
 // (coverage cap below 1 so the optical depth stays finite), T_MIN (early
 // termination), BIG (stands for an infinite ray parameter).
 
@@ -50,6 +57,8 @@ uniform int u_num_dirs;
 uniform int u_density_mode;
 uniform int u_normal_mode;
 uniform int u_opacity_mode;
+uniform float u_pixel_angle;
+uniform vec2 u_sheet_pixels;
 uniform vec3 u_background;
 
 layout(std430, binding = 0) readonly buffer TopIndex { int top[]; };
@@ -69,6 +78,9 @@ vec4 g_nbw;        // their interpolation weights (sum 1)
 mat4x3 g_nbdir;    // their directions, as columns
 vec3 g_color;      // premultiplied colour so far
 float g_trans;     // transmittance so far
+float g_tau_s;     // split: the sheets' optical depth so far (adds up linearly)
+float g_trans_f;   // split: the clouds' transmittance so far
+float g_dist0;     // distance (grid units) from the eye to the ray's origin o
 float g_t50;       // ray parameter (grid units, from o) where 1 - T reached 0.5
 bool g_has50;      // whether it did (t can be negative: o may lie past near)
 
@@ -116,8 +128,9 @@ void neighbours(vec3 w) {
     if (u_density_mode == 2) g_nbw = vec4(1.0, 0.0, 0.0, 0.0);
 }
 
-// Add voxel v, crossed over ray parameters [t0, t0 + chord] (grid units).
-void composite(int v, float t0, float chord) {
+// Add voxel v, crossed over ray parameters [t0, t0 + chord] (grid units)
+// from the voxel-local point x_in (the voxel is the unit cube).
+void composite(int v, vec3 x_in, float t0, float chord) {
     uint e0 = offs[v];
     uint e1 = offs[v + 1];
     float base_w = 0.0;        // sum A |n . w|: the facets' own projected area
@@ -126,10 +139,22 @@ void composite(int v, float t0, float chord) {
     float sum_w = 0.0;
     vec3 col_a = vec3(0.0);
     float sum_a = 0.0;
+    // Sheet laws (split, planar): each entry's sheet part and cloud part.
+    bool sheets = u_opacity_mode >= 2;
+    // Share of the sheets drawn as sheets at this scale (sheet_share()): all
+    // of them where the voxel spans enough pixels.
+    float pixels = 1.0 / ((g_dist0 + t0 + 0.5 * chord) * u_pixel_angle);
+    float zoom = clamp((pixels - u_sheet_pixels.x) / max(u_sheet_pixels.y - u_sheet_pixels.x, 1e-9), 0.0, 1.0);
+    float sheet_proj = 0.0;    // sum A_s |n . w|: the sheets' projected area
+    float crossed = 0.0;       // planar: fills of the sheets crossed; split: sheet_proj
+    float t_cross = 0.0;       // planar: fill-weighted crossing parameter from t0
+    vec3 col_s = vec3(0.0);
+    vec3 col_f = vec3(0.0);
+    float sum_f = 0.0;
     vec3 view = -g_d;
     for (uint e = e0; e < e1; ++e) {
-        uvec4 a = ent[2u * e];
-        uvec4 b = ent[2u * e + 1u];
+        uvec4 a = ent[3u * e];
+        uvec4 b = ent[3u * e + 1u];
         vec3 n = uintBitsToFloat(a.xyz);
         float area = uintBitsToFloat(a.w);
         vec2 kd_rg = unpackHalf2x16(b.x);
@@ -144,6 +169,37 @@ void composite(int v, float t0, float chord) {
         sum_w += wgt;
         col_a += area * c;
         sum_a += area;
+        if (sheets) {
+            uvec4 sh = ent[3u * e + 2u];
+            vec2 fill_share = unpackHalf2x16(sh.y);
+            float share = 1.0 - (1.0 - fill_share.y) * (1.0 - zoom);
+            float fill = share * fill_share.x;
+            float a_s = share * uintBitsToFloat(sh.z);
+            float len_n = length(n);
+            vec3 nh = len_n > 0.0 ? n / len_n : vec3(0.0);
+            float nw = dot(nh, g_d);
+            float ws = 0.0;
+            if (u_opacity_mode == 2) {
+                ws = a_s * abs(nw);
+            } else if (a_s > 0.0) {
+                // The plane is crossed inside the voxel where its signed
+                // distance changes sign: in one voxel only, for a plane cut
+                // into many, whatever the angle.
+                float s_in = dot(nh, x_in) - uintBitsToFloat(sh.x);
+                float s_out = s_in + nw * chord;
+                float slack = uintBitsToFloat(sh.w);
+                if (min(s_in, s_out) <= slack && max(s_in, s_out) >= -slack) {
+                    ws = fill;
+                    t_cross += fill * clamp(nw != 0.0 ? -s_in / nw : 0.0, 0.0, chord);
+                }
+            }
+            sheet_proj += a_s * abs(nw);
+            crossed += ws;
+            col_s += ws * c;
+            float wf = max(area - a_s, 0.0) * abs(dot(ns, g_d));
+            col_f += wf * c;
+            sum_f += wf;
+        }
     }
     vec4 dn = vec4(density_at(v, g_nb.x), density_at(v, g_nb.y), density_at(v, g_nb.z),
                    density_at(v, g_nb.w));
@@ -155,26 +211,62 @@ void composite(int v, float t0, float chord) {
     } else {
         density = dot(g_nbw, dn);
     }
+    vec3 color = sum_w > 1e-7 * sum_a ? col_w / sum_w : (sum_a > 0.0 ? col_a / sum_a : vec3(0.0));
     // Per unit length (grid units) both laws have optical depth sigma, and
     // the mean chord 1/P gives coverage min(1, D/P).
     float sigma, seg;
+    float t_after;
     if (u_opacity_mode == 0) {
         // exponential (Beer-Lambert): facets at independent random places.
         float alpha = clamp(density / g_p, 0.0, ALPHA_MAX);
         sigma = -log(1.0 - alpha) * g_p;
         seg = g_trans * (1.0 - exp(-sigma * chord));
-    } else {
+    } else if (u_opacity_mode == 1) {
         // linear: coverage adds up along the ray and saturates at 1.
         sigma = min(max(density, 0.0), g_p);
         seg = min(g_trans, sigma * chord);
+    } else {
+        // The cloud part (what the sheets leave of D) as Beer-Lambert; the
+        // sheets added linearly along the chord (split) or as crossed (planar).
+        float alpha_f = clamp(max(density - sheet_proj, 0.0) / g_p, 0.0, ALPHA_MAX);
+        sigma = -log(1.0 - alpha_f) * g_p;
+        float keep_f = exp(-sigma * chord);
+        float a_s;
+        if (u_opacity_mode == 2) {
+            a_s = min(sheet_proj, g_p) * chord;
+            g_tau_s += a_s;
+            g_trans_f *= keep_f;
+            t_after = max(0.0, 1.0 - g_tau_s) * g_trans_f;
+        } else {
+            // Sheet and cloud share the facets: their coverages add.
+            a_s = min(crossed, 1.0);
+            t_after = g_trans * max(0.0, keep_f - a_s);
+        }
+        seg = g_trans - t_after;
+        a_s = min(a_s, 1.0);
+        float a_f = 1.0 - keep_f;
+        if (a_s + a_f > 0.0) {
+            vec3 cs = crossed > 0.0 ? col_s / crossed : vec3(0.0);
+            vec3 cf = sum_f > 1e-7 * sum_a ? col_f / sum_f : color;
+            color = (a_s * cs + a_f * cf) / (a_s + a_f);
+        }
     }
     if (!(seg > 0.0)) return;
-    vec3 color = sum_w > 1e-7 * sum_a ? col_w / sum_w : (sum_a > 0.0 ? col_a / sum_a : vec3(0.0));
-    float t_after = g_trans - seg;
+    t_after = g_trans - seg;
     if (!g_has50 && t_after <= 0.5) {
         float dt = 0.0;
         if (g_trans > 0.5) {
-            dt = u_opacity_mode == 0 ? log(g_trans / 0.5) / sigma : (g_trans - 0.5) / sigma;
+            if (u_opacity_mode == 0) {
+                dt = log(g_trans / 0.5) / sigma;
+            } else if (u_opacity_mode == 1) {
+                dt = (g_trans - 0.5) / sigma;
+            } else if (u_opacity_mode == 2) {
+                dt = chord * (g_trans - 0.5) / seg;
+            } else {
+                float a_s = min(crossed, 1.0);
+                // The sheets alone take it there, or the cloud with them.
+                dt = g_trans * (1.0 - a_s) <= 0.5 ? t_cross / crossed : -log(0.5 / g_trans + a_s) / sigma;
+            }
         }
         g_t50 = t0 + dt;
         g_has50 = true;
@@ -226,6 +318,7 @@ void main() {
     g_d = mix(g_d, vec3(0.0), lessThan(abs(g_d), vec3(1e-12)));
     g_p = abs(g_d.x) + abs(g_d.y) + abs(g_d.z);
     vec3 o = u_center_g + u_base_c + u_base_s * lat;
+    g_dist0 = u_base_s * length(u_forward + lat);
 
     // Ray parameter t (grid units from o) range: the grid's box, then
     // near/far. A point at t lies u_base_s + t * cos_f along forward.
@@ -248,6 +341,8 @@ void main() {
     neighbours(g_d);
     g_color = vec3(0.0);
     g_trans = 1.0;
+    g_tau_s = 0.0;
+    g_trans_f = 1.0;
     g_t50 = 0.0;
     g_has50 = false;
 
@@ -271,7 +366,7 @@ void main() {
                 if (te > ti) {
                     ivec3 lc = cell - lo;
                     int v = pool[bid * BRICK * BRICK * BRICK + (lc.z * BRICK + lc.y) * BRICK + lc.x];
-                    if (v >= 0) composite(v, ti, te - ti);
+                    if (v >= 0) composite(v, o + g_d * ti - vec3(cell), ti, te - ti);
                     ti = te;
                 }
                 if (tx >= tb_end) break;

@@ -207,8 +207,11 @@ def test_far_volume_picks_a_coarse_level_close_to_the_single_level(r, scene, dis
     mesh, tex = scene
     cam = cam_at(mesh, distance)
     truth = r.render(mesh, cam, "mesh", ssaa=4)
-    single = r.render(tex, cam, "volume")
-    lod = r.render(tex, cam, "volume", lod=True)
+    # The law these numbers were measured with. With the default "planar" the
+    # finest level draws the trunk opaque and gains 1.8 dB at 16x, while the
+    # coarse levels, voxels of a pixel, are clouds either way (docs/coverage.md).
+    single = r.render(tex, cam, "volume", opacity="exponential")
+    lod = r.render(tex, cam, "volume", lod=True, opacity="exponential")
     st = r.last_lod_stats
     assert st["level"] >= 2 and st["pixels"] <= 1.0
     assert st["pixels"] * 2.0 > 1.0, "a coarser level would still be fine enough"

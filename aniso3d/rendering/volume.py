@@ -11,21 +11,38 @@ A voxel seen along the unit ray direction w (METHOD.md "Reference
 conventions"), with ``P(w) = |wx| + |wy| + |wz|`` and h the voxel edge:
 
 - coverage over the mean chord ``h / P(w)`` is ``alpha = min(1, D_v(w) / P(w))``;
-- over a chord c, ``opacity="exponential"`` (default; Beer-Lambert with
+- over a chord c, ``opacity="exponential"`` (Beer-Lambert with
   ``sigma = -ln(1 - alpha) P / h``, alpha capped at :data:`ALPHA_MAX` so it
   stays finite) multiplies the transmittance T by ``exp(-sigma c)``:
   facets at independent random places. ``opacity="linear"`` subtracts
   ``min(D, P) c / h`` from T (never below 0): coverage adds up along the ray.
-  Both give ``alpha`` over the mean chord. They differ across voxels: by
-  Crofton's formula a ray crossing a plane's layer of voxels adds up exactly
-  one crossing, so "linear" draws a single plane opaque from any angle, while
-  "exponential" lets ``(x / (1 + x))^(1 + x)`` through, with
+  Both give ``alpha`` over the mean chord. They differ across voxels, and
+  neither is right for both kinds of object (docs/coverage.md): a plane's
+  facets are perfectly correlated along a ray, so "exponential" lets
+  ``(x / (1 + x))^(1 + x)`` of the background through an opaque plane, with
   ``x = (|wx| + |wy|) / |wz|`` in the plane's frame (0.29 at 60 degrees off
-  its normal, 0.05 at 4 degrees). For foliage, the paper's object, leaves
-  really are scattered and the exponential law is the closer one (default
-  tree at 128^3: coverage 1.011 x the polygons' against 1.082, alpha RMSE
-  0.031 against 0.050); for solid surfaces "linear" is (quad at 60 degrees:
-  coverage 1.00 against 0.73);
+  its normal); "linear" adds up one crossing of a plane on average over the
+  rays (Crofton), exactly only for a plane along the grid axes, and leaves
+  stripes along the voxel edges of a tilted one; and it over-covers a cloud
+  of leaves (+0.16 to +0.25 of alpha);
+- ``opacity="planar"`` (default, :data:`DEFAULT_OPACITY`) reads each shading
+  entry as a *sheet*, the plane through its facets' centroid normal to their
+  mean normal (:func:`entry_sheets`, derived from what every texture
+  stores), covering a fraction ``fill`` of the plane's section of the voxel.
+  A ray counts a sheet where it crosses its plane inside the voxel (the
+  signed distance changes sign between the ray's entry and exit): a plane
+  cut into many voxels is crossed in exactly one of them, so it is opaque
+  from every angle, and a leaf cut into several is counted once. What a
+  sheet does not take (:func:`sheet_share`) is a cloud, Beer-Lambert on
+  what the sheets leave of D; in a voxel the two coverages add (they are
+  the same facets). An entry filling its section (a surface continuing into
+  the neighbours) is a sheet at every scale; a partial one (a leaf, an
+  edge) is crossed all or nothing, which one ray per pixel samples well only
+  on voxels spanning a few pixels, so on smaller ones it fades into its cloud,
+  the filtered average (:data:`SHEET_PIXELS`). ``opacity="split"`` is the
+  candidate that keeps the chord: sheets add up linearly along the ray (T =
+  ``max(0, 1 - tau_s) exp(-tau_f)``); measured, it keeps the stripes of
+  "linear" on tilted planes;
 - colour: the shaded colours of its shading entries (``shade()`` of
   ``lighting.glsl``; the view vector is -w, exact for every point of the
   ray) weighted by ``A_e |n_e . w|``, ``n_e`` the entry's mean facet normal
@@ -91,7 +108,29 @@ NEIGHBOURS = 4
 STEPS = ("dda",)
 DENSITY_MODES = ("facet", "kernel", "nearest")
 NORMAL_MODES = ("mean", "sample")
-OPACITY_MODES = ("exponential", "linear")
+OPACITY_MODES = ("exponential", "linear", "split", "planar")
+#: The opacity law drawn when none is asked for (chosen by demos/bench_coverage.py).
+DEFAULT_OPACITY = "planar"
+#: Sheet crossing tolerance, voxel units along the sheet's normal: a ray that
+#: crosses a sheet within it of a voxel face counts in both voxels, never in
+#: neither (float32 puts the same point a few 1e-5 apart in the two voxels).
+SHEET_EPS = 1e-3
+#: Extra crossing tolerance per unit spread of an entry's normals (see
+#: :class:`EntrySheets`).
+SHEET_BEND = 1.0
+#: ... fading out at this spread ``1 - |n|`` (normals some 0.3-0.5 rad apart):
+#: beyond it the entry is facets of unrelated directions, not a bent surface,
+#: and its plane is a fiction that no neighbour continues.
+SHEET_BEND_MAX = 0.01
+#: An entry is a sheet at every scale in proportion to how much of its
+#: plane's section of the voxel it fills: ramp from 0 at the first value to 1
+#: at the second (see :class:`EntrySheets`).
+SHEET_FILL = (0.7, 0.95)
+#: Every entry is a sheet in proportion to its voxel's size in pixels: ramp
+#: from 0 at the first value to 1 at the second (see :func:`sheet_share`).
+SHEET_PIXELS = (1.0, 3.0)
+#: uint32 words per shading entry on the GPU (three uvec4; see volume.frag).
+ENTRY_WORDS = 12
 #: OpenGL version the shaders need (shader storage buffers).
 REQUIRE_GL = 430
 _BIG = 1e30
@@ -138,17 +177,22 @@ def _entry_rows(texture: AnisoTexture, voxels: np.ndarray) -> tuple[np.ndarray, 
 
 
 def density_along(
-    texture: AnisoTexture, w: np.ndarray, mode: str = "facet", voxels: np.ndarray | None = None
-) -> np.ndarray:
+    texture: AnisoTexture, w: np.ndarray, mode: str = "facet", voxels: np.ndarray | None = None,
+    stored: bool = False,
+) -> np.ndarray:  # fmt: skip
     """(V,) projected facet area ``D_v(w)`` (units of h^2) of ``voxels`` (default:
     all) seen along the unit vector ``w``, read from the density sphere as
-    ``mode`` says (see the module docstring). Never negative."""
+    ``mode`` says (see the module docstring). Never negative. ``stored``
+    reads the samples as the GPU stores them (float16), as the NumPy ray does:
+    what the sheets leave of D is a small difference where they take most."""
     _check_choice(mode, DENSITY_MODES, "density reading")
     w = np.asarray(w, dtype=np.float64)
     w = w / np.linalg.norm(w)
     voxels = np.arange(texture.n_voxels) if voxels is None else np.asarray(voxels, dtype=np.int64)
     idx, wt = direction_weights(texture.directions, w, mode)
     dens = np.asarray(texture.density)[voxels][:, idx]
+    if stored:
+        dens = np.minimum(dens, 6e4).astype(np.float16).astype(np.float64)
     if mode != "facet":
         return np.maximum(dens @ wt, 0.0)
     rows, owner = _entry_rows(texture, voxels)
@@ -173,11 +217,20 @@ def voxel_colors(
     w = w / np.linalg.norm(w)
     voxels = np.arange(texture.n_voxels) if voxels is None else np.asarray(voxels, dtype=np.int64)
     rows, owner = _entry_rows(texture, voxels)
+    c, n = _entry_colors(texture, w, lighting, normal, rows)
+    area = np.asarray(texture.entry_area, dtype=np.float64)[rows]
+    return _weighted_colors(owner, len(voxels), c, area * np.abs(n @ w), area)
+
+
+def _entry_colors(
+    texture: AnisoTexture, w: np.ndarray, lighting: Lighting, normal: str, rows: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(E', 3) shaded colours, clamped to [0, 1], of entries ``rows`` seen along
+    the unit vector ``w``, and (E', 3) the normals they were shaded with."""
     if normal == "mean":
         n = np.asarray(texture.entry_normal, dtype=np.float64)[rows]
     else:
         n = texture.directions[texture.entry_direction[rows]]
-    area = np.asarray(texture.entry_area, dtype=np.float64)[rows]
     c = shade_np(
         n,
         -w,
@@ -186,9 +239,14 @@ def voxel_colors(
         texture.entry_shininess[rows],
         lighting,
     )
-    c = np.clip(c, 0.0, 1.0)
-    wgt = area * np.abs(n @ w)
-    V = len(voxels)
+    return np.clip(c, 0.0, 1.0), n
+
+
+def _weighted_colors(
+    owner: np.ndarray, V: int, c: np.ndarray, wgt: np.ndarray, area: np.ndarray
+) -> np.ndarray:
+    """(V, 3) per-voxel mean of entry colours ``c`` weighted by ``wgt``, or by
+    ``area`` where the weights vanish (a voxel seen edge-on); 0 if both do."""
     sum_w = np.bincount(owner, wgt, minlength=V)
     sum_a = np.bincount(owner, area, minlength=V)
     col_w = np.stack([np.bincount(owner, wgt * c[:, i], minlength=V) for i in range(3)], 1)
@@ -197,6 +255,230 @@ def voxel_colors(
     with np.errstate(invalid="ignore", divide="ignore"):
         out = np.where(use_w[:, None], col_w / sum_w[:, None], col_a / sum_a[:, None])
     return np.where(np.isfinite(out), out, 0.0)
+
+
+# ------------------------------------------------------------- the sheets
+
+def plane_section_area(normal: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    """(N,) area of the unit cube's section ``{x in [0, 1]^3 : n . x = d}`` by
+    the planes of unit normals ``normal`` (N, 3) and offsets ``offset`` (N,),
+    in cube faces (h^2); 0 where a plane misses the cube.
+
+    For U uniform in the cube, ``n . U`` has density ``area / |n|`` at d: the
+    sum of three uniforms on ``[0, |n_i|]`` (shifted by the negative
+    components). The two narrower ones sum to a trapezoid (CDF F, closed
+    form); the widest, c >= 1/sqrt(3), spreads it: ``(F(y) - F(y - c)) / c``,
+    never a division by a small width. A plane on a face counts it whole."""
+    n = np.asarray(normal, dtype=np.float64).reshape(-1, 3)
+    d = np.asarray(offset, dtype=np.float64).reshape(-1)
+    a, b, c = np.sort(np.abs(n), axis=1).T
+    y = d - np.minimum(n, 0.0).sum(axis=1)
+
+    def trapezoid_cdf(x: np.ndarray) -> np.ndarray:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rise = x * x / (2.0 * a * b)
+            flat = (x - 0.5 * a) / b
+            fall = 1.0 - (a + b - x) ** 2 / (2.0 * a * b)
+        return np.where(x <= 0, 0.0, np.where(x < a, rise, np.where(x < b, flat, np.where(x < a + b, fall, 1.0))))
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        area = (trapezoid_cdf(y) - trapezoid_cdf(y - c)) / c
+    # Along an axis the two narrow widths are 0: a point mass, the face whole.
+    on_axis = a + b == 0
+    return np.where(on_axis, ((y >= 0) & (y <= c)).astype(np.float64), area)
+
+
+def _ramp(x: np.ndarray, ends: tuple[float, float]) -> np.ndarray:
+    """0 below ``ends[0]``, 1 above ``ends[1]``, linear between."""
+    lo, hi = ends
+    return np.clip((np.asarray(x, dtype=np.float64) - lo) / max(hi - lo, 1e-9), 0.0, 1.0)
+
+
+def sheet_share(static: np.ndarray, voxel_pixels: np.ndarray) -> np.ndarray:
+    """Share in [0, 1] of an entry's sheet area drawn as a sheet, from its
+    static share (:attr:`EntrySheets.share`) and the size of its voxel in
+    pixels where the ray crosses it (inf: a point sample). Mirrors volume.frag.
+
+    A sheet that fills its voxel's section continues into its neighbours
+    and is crossed exactly once by any ray: a sheet at every scale. A partial
+    one (a leaf, a surface's edge) is crossed or missed, all or nothing,
+    which a single ray per pixel samples well only where the voxel spans
+    several pixels (:data:`SHEET_PIXELS`); smaller, its cloud (coverage
+    spread through the voxel) is the filtered average."""
+    zoom = _ramp(voxel_pixels, SHEET_PIXELS)
+    return 1.0 - (1.0 - np.asarray(static, dtype=np.float64)) * (1.0 - zoom)
+
+
+@dataclass(frozen=True)
+class EntrySheets:
+    """Each shading entry of a texture read as a sheet: the plane through its
+    facets' centroid normal to their mean normal, in voxel-local grid
+    coordinates (the voxel is the unit cube). All (E,) but ``normal`` (E, 3).
+
+    Attributes:
+        normal: unit normal (0 where the facets have no mean direction).
+        offset: the plane ``normal . x = offset``.
+        section: area of the plane's section of the voxel, h^2.
+        area: facet area that can be drawn as a sheet, ``min(A, section)``
+            (h^2); the rest of the entry's area A is always cloud.
+        fill: ``area / section``, the coverage of the section, in [0, 1]
+            (to float16, as the GPU stores it).
+        share: static share of ``area`` drawn as a sheet at every scale:
+            :data:`SHEET_FILL` ramp of how well the entry, or its voxel's
+            facets together (a bent surface whose facets fall on several
+            sample directions), fill their plane's section (to float16).
+        slack: crossing tolerance, voxel units along the normal:
+            :data:`SHEET_EPS` plus :data:`SHEET_BEND` times the normals'
+            spread ``sqrt(1 - |n|)`` (fading out by :data:`SHEET_BEND_MAX`):
+            a bent surface's planes step where they meet at a voxel face, by
+            about its bend over the voxel, and a ray must not slip through.
+    """
+
+    normal: np.ndarray
+    offset: np.ndarray
+    section: np.ndarray
+    area: np.ndarray
+    fill: np.ndarray
+    share: np.ndarray
+    slack: np.ndarray
+
+
+def _sections(normal: np.ndarray, local: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unit normals, offsets and section areas of the planes through the
+    voxel-local points ``local`` (N, 3) normal to ``normal`` (N, 3, any
+    length; 0: no plane, section 0)."""
+    length = np.linalg.norm(normal, axis=1)
+    ok = length > 1e-6
+    nh = np.where(ok[:, None], normal / np.where(ok, length, 1.0)[:, None], 0.0)
+    # The outer cells are unbounded (clip.py): keep the plane on the cube.
+    d = np.clip(np.sum(nh * local, axis=1), np.minimum(nh, 0).sum(1), np.maximum(nh, 0).sum(1))
+    return nh, d, np.where(ok, plane_section_area(nh, d), 0.0)
+
+
+def entry_sheets(texture: AnisoTexture, voxels: np.ndarray | None = None) -> EntrySheets:
+    """The sheets of ``texture``'s entries (see :class:`EntrySheets`), derived
+    from what every texture stores (entry area, mean normal, centroid), so
+    old files and every pyramid level have them. With ``voxels``, only their
+    entries, voxel by voxel in the given order."""
+    if voxels is None:
+        rows, owner = np.arange(texture.n_entries), texture.entry_voxel
+        V = texture.n_voxels
+    else:
+        voxels = np.asarray(voxels, dtype=np.int64)
+        rows, owner = _entry_rows(texture, voxels)
+        V = len(voxels)
+    n = np.asarray(texture.entry_normal, dtype=np.float64)[rows]
+    area = np.asarray(texture.entry_area, dtype=np.float64)[rows]
+    h = float(texture.voxel_size)
+    cell = np.asarray(texture.coords, dtype=np.float64)[texture.entry_voxel[rows]]
+    centroid = np.asarray(texture.entry_centroid, np.float64)[rows]
+    local = (centroid - np.asarray(texture.origin, np.float64)) / h - cell
+    nh, d, section = _sections(n, local)
+    # The voxel's facets together: net area along their mean normal over the
+    # section of the plane through their centroid.
+    net = np.stack([np.bincount(owner, area * n[:, i], minlength=V) for i in range(3)], axis=1)
+    total = np.maximum(np.bincount(owner, area, minlength=V), 1e-300)
+    centre = np.stack([np.bincount(owner, area * local[:, i], minlength=V) for i in range(3)], 1) / total[:, None]
+    _, _, voxel_section = _sections(net, centre)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        own = np.where(section > 1e-9, area / section, 0.0)
+        together = np.where(voxel_section > 1e-9, np.linalg.norm(net, axis=1) / voxel_section, 0.0)
+        sheet_area = np.where(section > 1e-9, np.minimum(area, section), 0.0)
+        fill = np.where(section > 1e-9, sheet_area / section, 0.0)
+    share = _ramp(np.maximum(own, together[owner]), SHEET_FILL)
+    spread = np.clip(1.0 - np.linalg.norm(n, axis=1), 0.0, 1.0)
+    slack = SHEET_EPS + SHEET_BEND * np.sqrt(spread) * np.clip(1.0 - spread / SHEET_BEND_MAX, 0.0, 1.0)
+    # Fill and share as the GPU stores them (float16): where the sheets bring
+    # a ray's transmittance to about 0.5, its depth hangs on the last digit.
+    fill = np.clip(fill, 0.0, 1.0).astype(np.float16).astype(np.float64)
+    share = share.astype(np.float16).astype(np.float64)
+    return EntrySheets(nh, d, section, sheet_area, fill, share, slack)
+
+
+@dataclass
+class SheetTerms:
+    """What the sheet laws ("split", "planar") need of each voxel a ray
+    crosses, all (V,) or (V, 3):
+
+    - ``projected``: the sheets' projected area ``sum A_s |n . w|`` (h^2);
+    - ``crossed``: "planar": the sum of the fills of the sheets the ray
+      crosses inside the voxel; "split": ``projected`` (their linear rate);
+    - ``t_cross``: "planar": the fill-weighted mean ray parameter of those
+      crossings, from the voxel's entry (grid units);
+    - ``sheet_color`` and ``cloud_color``: the entries' shaded colours weighted
+      by what each adds to the sheet part and by its cloud area ``(A - A_s)
+      |n . w|``.
+    """
+
+    projected: np.ndarray
+    crossed: np.ndarray
+    t_cross: np.ndarray
+    sheet_color: np.ndarray
+    cloud_color: np.ndarray
+
+
+def sheet_terms(
+    texture: AnisoTexture,
+    w: np.ndarray,
+    lighting: Lighting,
+    voxels: np.ndarray,
+    x_in: np.ndarray,
+    chords: np.ndarray,
+    opacity: str = DEFAULT_OPACITY,
+    normal: str = "mean",
+    voxel_pixels: np.ndarray | float = np.inf,
+    sheets: EntrySheets | None = None,
+) -> SheetTerms:
+    """:class:`SheetTerms` of ``voxels`` (V,) crossed along the unit vector
+    ``w`` from the voxel-local points ``x_in`` (V, 3; the voxel is the unit
+    cube) over ``chords`` (V,) grid units, each voxel spanning
+    ``voxel_pixels`` (V,) pixels there (see :func:`sheet_share`). Mirrors
+    composite() in volume.frag.
+
+    A ray crosses a sheet's plane inside the voxel when the plane's signed
+    distance changes sign (within the sheet's slack) between where the ray
+    enters and leaves: a plane cut into many voxels is crossed in exactly one
+    of them, whatever the angle."""
+    w = np.asarray(w, dtype=np.float64)
+    w = w / np.linalg.norm(w)
+    voxels = np.asarray(voxels, dtype=np.int64)
+    V = len(voxels)
+    rows, owner = _entry_rows(texture, voxels)
+    if sheets is None:
+        sh, at = entry_sheets(texture, voxels), np.arange(len(rows))
+    else:
+        sh, at = sheets, rows
+    c, n = _entry_colors(texture, w, lighting, normal, rows)
+    area = np.asarray(texture.entry_area, dtype=np.float64)[rows]
+    share = sheet_share(sh.share[at], np.broadcast_to(voxel_pixels, (V,))[owner])
+    nh, a_s, fill = sh.normal[at], share * sh.area[at], share * sh.fill[at]
+    nw = nh @ w
+    projected = np.bincount(owner, a_s * np.abs(nw), minlength=V)
+    if opacity == "split":
+        ws = a_s * np.abs(nw)
+        t_hit = np.zeros(len(rows))
+    else:
+        s_in = np.einsum("ek,ek->e", nh, np.asarray(x_in, np.float64)[owner]) - sh.offset[at]
+        s_out = s_in + nw * np.asarray(chords, np.float64)[owner]
+        slack = sh.slack[at]
+        hit = (np.minimum(s_in, s_out) <= slack) & (np.maximum(s_in, s_out) >= -slack)
+        ws = np.where(hit & (a_s > 0), fill, 0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_hit = np.where(nw != 0, -s_in / nw, 0.0)
+        t_hit = np.clip(t_hit, 0.0, np.asarray(chords, np.float64)[owner])
+    crossed = np.bincount(owner, ws, minlength=V)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_cross = np.where(crossed > 0, np.bincount(owner, ws * t_hit, minlength=V) / crossed, 0.0)
+    zero = np.zeros(len(rows))
+    sheet_color = _weighted_colors(owner, V, c, ws, zero)
+    cloud_w = np.maximum(area - a_s, 0.0) * np.abs(n @ w)
+    all_w = area * np.abs(n @ w)
+    cloud_color = np.where(
+        (np.bincount(owner, cloud_w, minlength=V) > 1e-7 * np.bincount(owner, area, minlength=V))[:, None],
+        _weighted_colors(owner, V, c, cloud_w, zero),
+        _weighted_colors(owner, V, c, all_w, area),
+    )
+    return SheetTerms(projected, crossed, t_cross, sheet_color, cloud_color)
 
 
 # ------------------------------------------------------------ the NumPy ray
@@ -223,16 +505,21 @@ def march_ray_np(
     t_range: tuple[float, float] = (0.0, np.inf),
     density: str = "facet",
     normal: str = "mean",
-    opacity: str = "exponential",
+    opacity: str = DEFAULT_OPACITY,
+    pixel_angle: float = 0.0,
 ) -> tuple[np.ndarray, float]:
     """One ray through ``texture``, the slow twin of a GPU pixel.
 
-    ``origin`` (3,) and ``direction`` (3,) are world; ``t_range`` limits the
-    ray parameter (world distance along the unit direction; the renderer
-    passes the near and far planes). Returns the pixel's (3,) RGB in [0, 1],
-    ``C + T * background``, and its alpha ``1 - T``.
+    ``origin`` (3,), the eye, and ``direction`` (3,) are world; ``t_range``
+    limits the ray parameter (world distance along the unit direction; the
+    renderer passes the near and far planes). ``pixel_angle`` is the angle a
+    pixel spans, radians (the renderer's ``2 tan(fov / 2) / height``): a
+    voxel at distance r from the eye spans ``h / (r pixel_angle)`` pixels,
+    which the sheet law "planar" reads (:func:`sheet_share`); 0 stands for a
+    point sample. Returns the pixel's (3,) RGB in [0, 1], ``C + T *
+    background``, and its alpha ``1 - T``.
     """
-    tr = trace_ray_np(texture, origin, direction, lighting, t_range, density, normal, opacity)
+    tr = trace_ray_np(texture, origin, direction, lighting, t_range, density, normal, opacity, pixel_angle)
     return tr.rgb, tr.alpha
 
 
@@ -244,7 +531,8 @@ def trace_ray_np(
     t_range: tuple[float, float] = (0.0, np.inf),
     density: str = "facet",
     normal: str = "mean",
-    opacity: str = "exponential",
+    opacity: str = DEFAULT_OPACITY,
+    pixel_angle: float = 0.0,
 ) -> RayTrace:
     """:func:`march_ray_np` with what the ray met (see :class:`RayTrace`)."""
     _check_choice(density, DENSITY_MODES, "density reading")
@@ -289,7 +577,7 @@ def trace_ray_np(
             key = int(cell_keys(cell, shape)[0])
             i = int(np.searchsorted(keys, key))
             if i < len(keys) and keys[i] == key:
-                hits.append((i, t, te - t))
+                hits.append((i, t, te - t, cell.copy()))
             t = te
         if tx >= t1:
             break
@@ -301,34 +589,78 @@ def trace_ray_np(
 
     P = float(np.abs(d).sum())
     vox = np.array([hv[0] for hv in hits], dtype=np.int64)
-    dens = density_along(texture, d, density, vox) if len(vox) else np.zeros(0)
+    dens = density_along(texture, d, density, vox, stored=True) if len(vox) else np.zeros(0)
     cols = voxel_colors(texture, d, lighting, normal, vox) if len(vox) else np.zeros((0, 3))
+    st = None
+    if opacity in ("split", "planar") and len(vox):
+        t_in = np.array([hv[1] for hv in hits])
+        chords = np.array([hv[2] for hv in hits])
+        x_in = o + d * t_in[:, None] - np.array([hv[3] for hv in hits], dtype=np.float64)
+        # A voxel's size in pixels where the ray crosses its middle (t is in
+        # voxels from the eye).
+        with np.errstate(divide="ignore"):
+            pixels = 1.0 / ((t_in + 0.5 * chords) * float(pixel_angle))
+        st = sheet_terms(texture, d, lighting, vox, x_in, chords, opacity, normal, pixels)
     C, T = np.zeros(3), 1.0
-    for (v, ti, chord), D, col in zip(hits, dens, cols, strict=True):
+    tau_s, T_f = 0.0, 1.0  # "split": the sheets' linear depth, the cloud's transmittance
+    for k, ((v, ti, chord, _), D, col) in enumerate(zip(hits, dens, cols, strict=True)):
         if T <= T_MIN:
             break
         if opacity == "exponential":
             alpha = min(max(D / P, 0.0), ALPHA_MAX)
             sigma = -np.log1p(-alpha) * P
             seg = -T * np.expm1(-sigma * chord)
-        else:
+        elif opacity == "linear":
             sigma = min(max(D, 0.0), P)
             seg = min(T, sigma * chord)
+        else:
+            alpha_f = min(max(D - st.projected[k], 0.0) / P, ALPHA_MAX)
+            sigma = -np.log1p(-alpha_f) * P
+            keep_f = np.exp(-sigma * chord)
+            if opacity == "split":
+                a_s = min(st.projected[k], P) * chord
+                tau_s += a_s
+                T_f *= keep_f
+                t_after = max(0.0, 1.0 - tau_s) * T_f
+            else:
+                # Sheet and cloud share the facets: their coverages add.
+                a_s = min(st.crossed[k], 1.0)
+                t_after = T * max(0.0, keep_f - a_s)
+            seg = T - t_after
+            a_s, a_f = min(a_s, 1.0), 1.0 - keep_f
+            if a_s + a_f > 0.0:
+                col = (a_s * st.sheet_color[k] + a_f * st.cloud_color[k]) / (a_s + a_f)
         if not seg > 0.0:
             continue
         out.voxels.append(v)
         out.t_enter.append(ti * h)
         out.chords.append(chord * h)
         if out.t50 is None and T - seg <= 0.5:
-            dt = 0.0
-            if T > 0.5:
-                dt = np.log(T / 0.5) / sigma if opacity == "exponential" else (T - 0.5) / sigma
-            out.t50 = (ti + dt) * h
+            out.t50 = (ti + _t50_offset(opacity, T, seg, sigma, chord, st, k)) * h
         C += seg * col
         T -= seg
     out.rgb = np.clip(C + T * bg, 0.0, 1.0)
     out.alpha = float(np.clip(1.0 - T, 0.0, 1.0))
     return out
+
+
+def _t50_offset(
+    opacity: str, T: float, seg: float, sigma: float, chord: float, st: SheetTerms | None, k: int
+) -> float:
+    """Where in a voxel (ray parameter from its entry, grid units) 1 - T
+    reaches 0.5, given T before it and ``seg`` taken in it. Mirrors volume.frag."""
+    if T <= 0.5:
+        return 0.0
+    if opacity == "exponential":
+        return float(np.log(T / 0.5) / sigma)
+    if opacity == "linear":
+        return (T - 0.5) / sigma
+    if opacity == "split":
+        return chord * (T - 0.5) / seg
+    a_s = min(st.crossed[k], 1.0)
+    if T * (1.0 - a_s) <= 0.5:  # the sheets alone take it there
+        return float(st.t_cross[k])
+    return float(-np.log(0.5 / T + a_s) / sigma)
 
 
 # --------------------------------------------------------------- GPU layout
@@ -337,7 +669,8 @@ def trace_ray_np(
 def pack_volume(texture: AnisoTexture) -> dict[str, np.ndarray]:
     """The arrays volume.frag reads, in upload order (see its header): the
     two-level index (``top``, ``pool``), ``offsets``, ``density`` (float16
-    pairs in uint32), ``entries`` (8 uint32 per entry) and ``directions``.
+    pairs in uint32), ``entries`` (:data:`ENTRY_WORDS` uint32 per entry: the
+    shading entry and its sheet, :func:`entry_sheets`) and ``directions``.
     CPU only; checks the texture holds finite numbers."""
     if not isinstance(texture, AnisoTexture):
         raise InputError(f"the volume renderer draws an AnisoTexture, got {type(texture).__name__}")
@@ -382,7 +715,8 @@ def pack_volume(texture: AnisoTexture) -> dict[str, np.ndarray]:
     density = dens16.view(np.uint32)
 
     E = texture.n_entries
-    entries = np.zeros((E, 8), dtype=np.uint32)
+    sheets = entry_sheets(texture)
+    entries = np.zeros((E, ENTRY_WORDS), dtype=np.uint32)
     entries[:, 0:3] = np.asarray(texture.entry_normal, dtype=np.float32).view(np.uint32)
     entries[:, 3] = np.asarray(texture.entry_area, dtype=np.float32).view(np.uint32)
     half = np.zeros((E, 4), dtype=np.float16)
@@ -391,6 +725,11 @@ def pack_volume(texture: AnisoTexture) -> dict[str, np.ndarray]:
     entries[:, 4:6] = half.view(np.uint32)
     entries[:, 6] = np.asarray(texture.entry_shininess, dtype=np.float32).view(np.uint32)
     entries[:, 7] = np.asarray(texture.entry_direction, dtype=np.uint32)
+    entries[:, 8] = sheets.offset.astype(np.float32).view(np.uint32)
+    fill_share = np.stack([sheets.fill, sheets.share], axis=1).astype(np.float16)
+    entries[:, 9] = fill_share.view(np.uint32).ravel()
+    entries[:, 10] = sheets.area.astype(np.float32).view(np.uint32)
+    entries[:, 11] = sheets.slack.astype(np.float32).view(np.uint32)
 
     directions = np.zeros((K, 4), dtype=np.float32)
     directions[:, :3] = texture.directions
@@ -458,7 +797,7 @@ class VolumeOptions(DrawOptions):
     step: str = "dda"
     density: str = "facet"
     normal: str = "mean"
-    opacity: str = "exponential"
+    opacity: str = DEFAULT_OPACITY
     pixel_error: float | None = None
 
     def __post_init__(self) -> None:
@@ -556,7 +895,9 @@ class VolumeRenderer:
     ) -> DrawStats:  # fmt: skip
         """Draw into the bound framebuffer (cleared to the background, alpha 0).
 
-        Options: ``options`` (:class:`VolumeOptions`) or the same as keywords.
+        Options: ``options`` (:class:`VolumeOptions`) or the same as keywords;
+        ``opacity`` "planar" (default) | "exponential" | "linear" | "split" says
+        how coverage adds up along the ray (see the module docstring).
         A pyramid upload (:class:`GPULodVolume`) draws the level
         :func:`~aniso3d.rendering.select.volume_level` picks for ``pixel_error``
         (framebuffer pixels, default 1).
@@ -596,6 +937,8 @@ class VolumeRenderer:
                 "u_density_mode": DENSITY_MODES.index(density),
                 "u_normal_mode": NORMAL_MODES.index(normal),
                 "u_opacity_mode": OPACITY_MODES.index(opacity),
+                "u_pixel_angle": 2.0 * t / float(view.size[1]),
+                "u_sheet_pixels": tuple(float(x) for x in SHEET_PIXELS),
                 "u_background": tuple(float(c) for c in view.lighting.background),
             },
         )
