@@ -132,3 +132,25 @@ def test_scene_uploads_through_the_renderer_cache_and_reads_draw_stats(renderer)
     assert sum("uploaded mesh for polygons" in line for line in log) == 2
     assert released == ["mesh", "volume"]
 
+
+
+def test_auto_resolution_is_what_the_start_view_needs_and_steps_from_there():
+    from aniso3d.app.viewer import RESOLUTIONS
+    from aniso3d.rendering.select import needed_resolution
+
+    mesh = scenes.cube()
+    for size, expected in (((96, 72), 64), ((160, 120), 128)):
+        state = ViewState("mesh", mesh.bounds, Settings(resolution="auto"), aspect=size[0] / size[1])
+        line = state.resolve_resolution(size)
+        assert state.settings.resolution == expected == needed_resolution(state.orbit.camera(), size, mesh.bounds)
+        assert line == f"voxels {expected}³ (auto: a voxel about a pixel at the nearest point of the start view)"
+        assert expected in RESOLUTIONS
+        assert state.resolve_resolution(size) is None  # a number now: nothing to resolve
+    state.press("voxels down")
+    assert state.settings.resolution == 96  # the step below 128
+    # Nothing is converted from a texture or a point cloud: no choice to make.
+    tex = build_texture(mesh, 8, 4)
+    tstate = ViewState.for_input(tex, Settings(resolution="auto"))
+    assert tstate.resolve_resolution((96, 72)) is None and tstate.settings.resolution == 8
+    pstate = ViewState.for_input(tex.to_points(), Settings(resolution="auto"))
+    assert pstate.resolve_resolution((96, 72)) is None and isinstance(pstate.settings.resolution, int)

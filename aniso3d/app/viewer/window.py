@@ -134,6 +134,7 @@ class Viewer:
             self.data = Conversions(thing, self.state.kind, self.renderer.conversions)
             w, h = self.window.get_framebuffer_size()
             self.state.orbit.reset(w / max(h, 1))
+            auto = self.state.resolve_resolution((w, h))
             self.scene = SceneView(self.gl, self.renderer, self.data, self.state.orbit.bounds, self._say)
             self.overlay = Overlay(self.gl, scale=w / max(self.window.width, 1))
             self._install_handlers()
@@ -147,6 +148,8 @@ class Viewer:
         self._frames = 0  # frames presented
         self._unpresented = False  # a line was logged since the last "frame N presented"
         self._say(f"window {self.window.width}x{self.window.height}, OpenGL {self.gl.version} ({self.gl.renderer})")
+        if auto:
+            self._say(auto)
 
     # ------------------------------------------------------------- events
 
