@@ -334,7 +334,9 @@ def figure(r, thing, camera: Camera, args) -> Figure:
             detail += f"; shown enlarged {k}x"
         rows.append(FigureRow(title, f"{title}: {detail}", cam, voxels, panels))
         strips.append(label_panels(images, [p.label for p in panels]))
-    return Figure(_stack(strips, [row.title for row in rows]), rows, _figure_lines(rows, args))
+    note = (f"times: median of {FIGURE_FRAMES} frames at {args.size[0]}x{args.size[1]} on {r.gl.renderer}"
+            + ("; PSNR inside the object's screen box against the ground truth" if is_mesh else ""))  # fmt: skip
+    return Figure(_stack(strips, [row.title for row in rows], note), rows, _figure_lines(rows, args) + [note])
 
 
 def enlarge(images: list[np.ndarray], box: tuple[int, int, int, int]) -> tuple[list[np.ndarray], int]:
@@ -353,8 +355,9 @@ def enlarge(images: list[np.ndarray], box: tuple[int, int, int, int]) -> tuple[l
     return out, k
 
 
-def _stack(strips: list[np.ndarray], titles: list[str], gap: int = 8) -> np.ndarray:
-    """Rows of labelled panels one above the other on white, each under its title."""
+def _stack(strips: list[np.ndarray], titles: list[str], note: str = "", gap: int = 8) -> np.ndarray:
+    """Rows of labelled panels one above the other on white, each under its
+    title, and a ``note`` line at the foot."""
     from PIL import Image, ImageDraw, ImageFont
 
     h = max(s.shape[0] for s in strips)
@@ -363,19 +366,24 @@ def _stack(strips: list[np.ndarray], titles: list[str], gap: int = 8) -> np.ndar
         font = ImageFont.truetype("DejaVuSans.ttf", font_px)
     except OSError:  # not installed: Pillow's own font, which has no superscripts
         titles = [t.replace("³", "^3") for t in titles]
+        note = note.replace("³", "^3")
         try:
             font = ImageFont.load_default(size=font_px)
         except TypeError:  # Pillow < 10.1 has one bitmap size
             font = ImageFont.load_default()
     title_h = int(font_px * 1.4) + gap
     w = max(s.shape[1] for s in strips)
-    canvas = Image.new("RGB", (w, sum(s.shape[0] + title_h for s in strips)), (255, 255, 255))
+    foot = title_h if note else 0
+    canvas = Image.new("RGB", (w, sum(s.shape[0] + title_h for s in strips) + foot), (255, 255, 255))
     draw = ImageDraw.Draw(canvas)
     y = 0
     for strip, title in zip(strips, titles, strict=True):
         draw.text((gap, y + gap), title, fill=(0, 0, 0), font=font)
         canvas.paste(Image.fromarray(np.ascontiguousarray(strip)), (0, y + title_h))
         y += title_h + strip.shape[0]
+    if note:
+        draw.text((gap, y), note, fill=(90, 90, 90), font=font.font_variant(size=max(10, font_px * 3 // 4))
+                  if hasattr(font, "font_variant") else font)  # fmt: skip
     return np.asarray(canvas)
 
 
