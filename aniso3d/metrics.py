@@ -15,6 +15,11 @@ and that uint8 image is what a viewer shows. The images are therefore taken as
 
 Every function takes two (H, W, 3) uint8 arrays of the same shape: the
 reference (ground truth) first, then the test image.
+
+Where the errors are measured: inside :func:`screen_box`, the pixel box the
+object's bounds project to (plus a margin), so that a far, small object is
+not scored mostly on empty background (``aniso3d bench`` and the figure of
+``aniso3d render --method all`` measure the same way: :func:`compare_in_box`).
 """
 
 from __future__ import annotations
@@ -56,6 +61,42 @@ def _check_pair(
             f"images of {ref.shape[1]}x{ref.shape[0]} pixels are too small; need {min_side} a side"
         )
     return ref, tst
+
+
+def screen_box(
+    xy: np.ndarray, size: tuple[int, int], margin: int = 8, min_side: int = 16
+) -> tuple[int, int, int, int]:
+    """Pixel box ``(x0, y0, x1, y1)`` (x0, y0 inclusive, x1, y1 exclusive; y
+    down) around the points ``xy`` (N, 2) in pixels, e.g. the eight corners of
+    an object's bounds projected by ``Camera.project``, grown by ``margin``
+    pixels, clamped to the image ``size = (W, H)``, and at least ``min_side``
+    pixels a side where the image allows (SSIM needs 11), centred on the
+    points' box when it had to grow."""
+    pts = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    if len(pts) == 0 or not np.isfinite(pts).all():
+        raise InputError(f"screen_box needs (N, 2) finite pixel positions, got {np.asarray(xy).shape}")
+    w, h = int(size[0]), int(size[1])
+    if w < 1 or h < 1:
+        raise InputError(f"image size must be at least 1x1 pixels, got {size}")
+    x0, y0 = np.floor(pts.min(axis=0)) - margin
+    x1, y1 = np.ceil(pts.max(axis=0)) + margin
+    box = []
+    for lo, hi, n in ((x0, x1, w), (y0, y1, h)):
+        lo, hi = int(min(max(0, lo), n)), int(max(min(n, hi), 0))
+        side = min(n, max(min_side, hi - lo))
+        if hi - lo < side:
+            mid = (lo + hi) // 2
+            lo = max(0, min(n - side, mid - side // 2))
+            hi = lo + side
+        box.append((lo, hi))
+    (x0, x1), (y0, y1) = box
+    return x0, y0, x1, y1
+
+
+def crop(image: np.ndarray, box: tuple[int, int, int, int]) -> np.ndarray:
+    """The RGB pixels of ``image`` (H, W, 3 or 4) inside ``box`` = (x0, y0, x1, y1)."""
+    x0, y0, x1, y1 = box
+    return np.asarray(image)[y0:y1, x0:x1, :3]
 
 
 def mse(reference: np.ndarray, test: np.ndarray) -> float:
@@ -157,3 +198,11 @@ def compare(
     if with_flip:
         out["flip"] = flip(reference, test)
     return out
+
+
+def compare_in_box(
+    reference: np.ndarray, test: np.ndarray, box: tuple[int, int, int, int], with_flip: bool | None = None
+) -> dict[str, float]:
+    """:func:`compare` of the two images' RGB pixels inside ``box``
+    (:func:`screen_box`): the errors ``aniso3d bench`` reports."""
+    return compare(crop(reference, box), crop(test, box), with_flip)

@@ -460,3 +460,24 @@ def test_window_answers_while_a_texture_builds_and_esc_quits(xserver, tmp_path):
         assert "built texture" not in s.log()
     finally:
         s.kill()
+
+
+@pytest.mark.xvfb
+def test_window_picks_the_resolution_its_start_view_needs(xserver, tmp_path):
+    """``--resolution auto`` (the default): the start view's need
+    (needed_resolution for the window's size), logged, built, and stepped
+    from with ``[``."""
+    from aniso3d.rendering.select import needed_resolution
+
+    cube = scenes.cube()
+    expected = needed_resolution(Orbit(cube.bounds, aspect=160 / 120).camera(), (160, 120), cube.bounds)
+    s = Session(xserver, tmp_path, ["scene:cube", "--size", "160x120", "--method", "volume"])
+    try:
+        m = s.wait_for(r"^aniso3d view: voxels (\d+)³ \(auto: .*start view\)$")
+        assert int(m.group(1)) == expected
+        s.settle(rf"showing volume \(.*\) at 160x120, quality fast, voxels {expected}³ K=16$", after=0)
+        lower = step_resolution(expected, -1)
+        s.press("bracketleft", rf"showing volume \(.*\) at 160x120, quality fast, voxels {lower}³ K=16$")
+        assert s.close("q") == 0, s.log()
+    finally:
+        s.kill()

@@ -1,15 +1,24 @@
 """``aniso3d render`` and ``aniso3d frames``: headless images from the CLI.
 
-``render --method all`` writes the paper's figure 3: the scene drawn as
-polygons (one sample per pixel), as the anisotropic texture by volume
-rendering, and as the texture's points drawn as splats, side by side and
-labelled with each one's frame time and error against the supersampled
-polygon ground truth.
+``--resolution auto`` (the default) converts a mesh only as finely as the
+view needs (:func:`~aniso3d.rendering.select.needed_resolution`: a voxel
+about a pixel where the object is nearest); ``frames`` takes the finest any
+camera of its path needs, built once.
+
+``render --method all`` writes the paper's figure 3, twice, to show the
+trade: a close-up row (the command's camera) and a minified row (the camera
+moved back until a voxel covers about a pixel), each with the ground truth
+(polygons supersampled, ``--gt-ssaa``), polygons at one sample per pixel, the
+anisotropic texture by volume rendering, and its points drawn as splats; every
+panel labelled with its frame time and its error as ``aniso3d bench``
+measures it (PSNR inside the object's screen box against the ground truth).
 """
 
 from __future__ import annotations
 
 import argparse
+import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -18,12 +27,30 @@ from aniso3d.app.common import Progress, image_size, load_input, positive_float,
 from aniso3d.build.bounds import bounds_of, surface_sample
 from aniso3d.build.mesh import Mesh
 from aniso3d.build.points import PointCloud
-from aniso3d.build.texture import DEFAULT_DIRECTIONS, DEFAULT_RESOLUTION
+from aniso3d.build.texture import DEFAULT_DIRECTIONS
 from aniso3d.errors import InputError
 from aniso3d.rendering.camera import Camera, turntable
-from aniso3d.rendering.select import describe_stats
+from aniso3d.rendering.select import AUTO_MIN_RESOLUTION, describe_stats, needed_resolution
 
 PANEL_METHODS = ("mesh", "volume", "splat")
+AUTO = "auto"
+#: The figure's minified row with ``--resolution auto``: the camera where a
+#: voxel of a texture of this resolution (the bench's baseline), or of half
+#: the close-up's if that is coarser, covers a pixel at the object's nearest
+#: point, so that "auto" picks this texture there: a level of the close-up's.
+MINIFIED_RESOLUTION = 128
+#: Frames timed per panel of the figure (the median is shown), after a warm-up frame.
+FIGURE_FRAMES = 3
+
+
+def resolution_arg(text: str) -> int | str:
+    """``--resolution``: "auto" or a whole number of voxels >= 1."""
+    if text.strip().lower() == AUTO:
+        return AUTO
+    try:
+        return positive_int(text)
+    except argparse.ArgumentTypeError as exc:
+        raise argparse.ArgumentTypeError(f"{exc} (or 'auto')") from None
 
 
 def add_render_options(p: argparse.ArgumentParser) -> None:
@@ -32,10 +59,11 @@ def add_render_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--size", type=image_size, default=(1024, 1024), help="image size, e.g. 800x600")
     p.add_argument("--ssaa", type=positive_int, default=1,
                    help="supersampling factor per axis (1 = one sample per pixel)")
-    p.add_argument("--gt-ssaa", type=positive_int, default=4,
+    p.add_argument("--gt-ssaa", type=positive_int, default=8,
                    help="supersampling of the polygon ground truth errors are measured against")
-    p.add_argument("--resolution", "-r", type=positive_int, default=DEFAULT_RESOLUTION,
-                   help="voxels along the longest axis")
+    p.add_argument("--resolution", "-r", type=resolution_arg, default=AUTO,
+                   help="voxels along the longest axis when a mesh is converted, or 'auto' (default): "
+                        "a voxel about a pixel where the object is nearest, a power of two from 8 to 256")
     p.add_argument("--directions", "-k", type=positive_int, default=DEFAULT_DIRECTIONS,
                    help="sphere sample directions K")
     p.add_argument("--placement", choices=("centroid", "center", "sphere"), default="centroid")
@@ -130,6 +158,18 @@ def frame_options(method: str, args) -> dict:
     return {"build": build_options(method, args), "options": draw_options(method, args)}
 
 
+def resolve_resolution(r, thing, method: str | None, cameras, args) -> str:
+    """Turn ``--resolution auto`` into a number in ``args`` where a mesh is
+    converted (the finest any of ``cameras`` needs, the texture made ready in
+    ``r``'s cache); the words for the output ("" where no texture is made)."""
+    if not isinstance(thing, Mesh) or method == "mesh":
+        return ""
+    if args.resolution != AUTO:
+        return f"texture {args.resolution}³"
+    args.resolution = r.resolve_resolution(thing, cameras, args.size, args.directions)
+    return f"texture {args.resolution}³ (auto)"
+
+
 def default_method(thing) -> str:
     """The paper's method, splats, for every input (a mesh is converted)."""
     return "splat"
@@ -152,18 +192,20 @@ def cmd_render(args) -> int:
     camera = camera_from_args(args, bounds, surface_sample(thing))
     with Renderer(args.size, backend=args.backend) as r:
         if args.method == "all":
-            img, rows = figure(r, thing, camera, args)
-            for row in rows:
-                print(row)
+            fig = figure(r, thing, camera, args)
+            img = fig.image
+            for line in fig.lines:
+                print(line)
         else:
             method = args.method or default_method(thing)
+            voxels = resolve_resolution(r, thing, method, camera, args)
             opts = frame_options(method, args)
             img = r.render(thing, camera, method, ssaa=args.ssaa, **opts)
             # A second frame measures the steady state (the first includes uploads).
             frame = r.render_frame(thing, camera, method, ssaa=args.ssaa, **opts)
             print(f"{method}: {args.size[0]}x{args.size[1]}, ssaa {args.ssaa}, "
                   f"frame {1000 * frame.seconds:.1f} ms on {r.gl.renderer}, "
-                  f"{frame.stats.drawn:,} {frame.stats.unit}")  # fmt: skip
+                  f"{frame.stats.drawn:,} {frame.stats.unit}" + (f", {voxels}" if voxels else ""))  # fmt: skip
             if frame.stats.lod:
                 print(describe_stats(frame.stats.lod))
     save_png(out, img)
@@ -171,47 +213,198 @@ def cmd_render(args) -> int:
     return 0
 
 
-def figure(r, thing, camera: Camera, args) -> tuple[np.ndarray, list[str]]:
-    """The three renderings side by side with labels, and one text row each."""
-    from aniso3d.rendering.images import label_panels
+@dataclass(frozen=True)
+class Panel:
+    """One panel of the figure: ``name`` ("(b) volume rendering"), its
+    caption, frame time (ms) and PSNR (dB) in the object's box against the
+    ground truth (None without one, and for the ground truth itself)."""
 
-    panels, labels, rows = [], [], []
-    truth = None
-    methods = PANEL_METHODS if isinstance(thing, Mesh) else tuple(
+    name: str
+    label: str
+    ms: float
+    psnr: float | None
+    lod: str = ""
+
+
+@dataclass(frozen=True)
+class FigureRow:
+    """One row: its name ("close-up", "minified"), title (what it shows, in
+    words), camera, the texture drawn ("" for none) and panels."""
+
+    name: str
+    title: str
+    camera: Camera
+    voxels: str
+    panels: list[Panel]
+
+
+@dataclass(frozen=True)
+class Figure:
+    """The figure of ``render --method all``: the image, its rows, and the
+    text lines the command prints (one per method, both rows side by side)."""
+
+    image: np.ndarray
+    rows: list[FigureRow]
+    lines: list[str]
+
+
+def minified_camera(camera: Camera, bounds: np.ndarray, size: tuple[int, int], resolution: int) -> Camera:
+    """``camera`` moved along its view axis (same target, direction and field
+    of view) until a voxel of a texture of ``resolution`` voxels along the
+    longest extent of ``bounds`` covers one pixel of an image of ``size`` at
+    the box's nearest point (:func:`~aniso3d.rendering.select.nearest_depth`):
+    the view where "auto" picks that resolution, and where structure finer
+    than a voxel falls below a pixel."""
+    from aniso3d.rendering.select import nearest_depth
+
+    b = np.asarray(bounds, dtype=np.float64)
+    voxel = float(np.max(b[1] - b[0])) / resolution
+    want = voxel * size[1] / (2.0 * math.tan(math.radians(camera.fov) / 2.0))
+    offset = np.subtract(camera.position, camera.target)
+    # Moving the eye along the view axis adds the same depth to every point.
+    shift = want - nearest_depth(Camera(camera.position, camera.target, camera.up, camera.fov), b)
+    distance = float(np.linalg.norm(offset)) + shift
+    if distance <= 0.0:  # the target itself lies beyond: keep a sliver in front
+        distance = 1e-3 * float(np.linalg.norm(offset))
+    eye = np.asarray(camera.target) + offset / np.linalg.norm(offset) * distance
+    return Camera(tuple(eye), camera.target, camera.up, camera.fov)
+
+
+def figure(r, thing, camera: Camera, args) -> Figure:
+    """The figure of ``render --method all`` (see the module docstring): two
+    rows (close-up: ``camera``; minified: :func:`minified_camera` for the
+    texture's resolution: ``--resolution``, a saved texture's own, or with
+    "auto" :data:`MINIFIED_RESOLUTION` or half the close-up's), panels labelled with frame time and PSNR
+    in the object's screen box (:func:`~aniso3d.metrics.screen_box`)."""
+    from aniso3d.metrics import crop, psnr, screen_box
+    from aniso3d.rendering.images import label_panels
+    from aniso3d.rendering.select import nearest_depth
+
+    bounds = bounds_of(thing)
+    is_mesh = isinstance(thing, Mesh)
+    methods = PANEL_METHODS if is_mesh else tuple(
         m for m in PANEL_METHODS if m != "mesh" and (m == "splat" or not isinstance(thing, PointCloud))
     )
-    if isinstance(thing, Mesh):
-        truth = r.render(thing, camera, "mesh", ssaa=args.gt_ssaa)
-        gt_ms = 1000 * r.last_frame_seconds
-        panels.append(truth)
-        labels.append(f"ground truth: polygons {args.gt_ssaa}x{args.gt_ssaa} SSAA\n{gt_ms:.0f} ms")
-        rows.append(f"ground truth  polygons {args.gt_ssaa}x{args.gt_ssaa}  {gt_ms:8.1f} ms")
-    else:
-        rows.append("no polygon ground truth for this input: errors not measured")
-    names = {"mesh": "(a) polygons", "volume": "(b) volume rendering",
-             "splat": f"(c) {args.splat} splats ({args.quality})"}
-    for method in methods:
-        ssaa = args.ssaa
-        opts = frame_options(method, args)
-        r.render(thing, camera, method, ssaa=ssaa, **opts)  # warm-up: upload, compile
-        ms = 1000 * r.time_frames(thing, camera, method, frames=3, warmup=0, ssaa=ssaa, **opts)
-        frame = r.render_frame(thing, camera, method, ssaa=ssaa, **opts)
-        img = frame.color
-        text = f"{names[method]}{', ' + str(ssaa) + ' spp' if method == 'mesh' and ssaa == 1 else ''}\n{ms:.0f} ms"
-        row = f"{names[method]:<22} {ms:8.1f} ms"
-        lod_text = describe_stats(frame.stats.lod)
-        if truth is not None:
-            from aniso3d.metrics import psnr
+    auto = is_mesh and args.resolution == AUTO
+    if auto:
+        ref = max(AUTO_MIN_RESOLUTION, min(MINIFIED_RESOLUTION, needed_resolution(camera, args.size, bounds) // 2))
+    elif is_mesh:
+        ref = args.resolution
+    else:  # a saved texture's own voxels; a point cloud's splats are as they are
+        ref = getattr(thing, "resolution", MINIFIED_RESOLUTION)
+    extent = float(np.max(bounds[1] - bounds[0]))
+    corners = np.array([[x, y, z] for x in bounds[:, 0] for y in bounds[:, 1] for z in bounds[:, 2]])
+    spp = f"{args.ssaa}x{args.ssaa} spp" if args.ssaa > 1 else "1 spp"
+    names = {"mesh": f"(a) polygons, {spp}", "volume": "(b) volume rendering",
+             "splat": f"(c) {args.splat} splats ({args.quality})"}  # fmt: skip
 
-            p = psnr(img, truth)
-            text += f", PSNR {p:.1f} dB"
-            row += f"  PSNR {p:6.2f} dB"
-        if lod_text:
-            row += f"  {lod_text}"
-        panels.append(img)
-        labels.append(text)
-        rows.append(row)
-    return label_panels(panels, labels), rows
+    rows, strips = [], []
+    for title, cam in (("close-up", camera), ("minified", minified_camera(camera, bounds, args.size, ref))):
+        xy = cam.project(corners, args.size, bounds)
+        box = screen_box(xy, args.size)
+        panels, images, truth = [], [], None
+        if is_mesh:
+            truth = r.render(thing, cam, "mesh", ssaa=args.gt_ssaa)
+            ms = 1000 * r.last_frame_seconds
+            gt = f"ground truth: polygons {args.gt_ssaa}x{args.gt_ssaa}"
+            panels.append(Panel(gt, f"{gt}\n{ms:.0f} ms", ms, None))
+            images.append(truth)
+        for method in methods:
+            opts = frame_options(method, args)
+            r.render(thing, cam, method, ssaa=args.ssaa, **opts)  # warm-up: conversion, upload, compile
+            frames = [r.render_frame(thing, cam, method, ssaa=args.ssaa, **opts) for _ in range(FIGURE_FRAMES)]
+            ms, frame = 1000 * float(np.median([f.seconds for f in frames])), frames[-1]
+            label, err = f"{names[method]}\n{ms:.0f} ms", None
+            if truth is not None:
+                err = psnr(crop(truth, box), crop(frame.color, box))
+                label += f", PSNR {err:.1f} dB"
+            panels.append(Panel(names[method], label, ms, err, describe_stats(frame.stats.lod)))
+            images.append(frame.color)
+        depth = nearest_depth(cam, bounds)
+        if isinstance(thing, PointCloud):
+            voxels, detail = "", "points as given"
+        else:
+            res = needed_resolution(cam, args.size, bounds) if auto else ref
+            voxels = f"texture {res}³" + (" (auto)" if auto else "")
+            px = (extent / res) * args.size[1] / (2 * depth * math.tan(math.radians(cam.fov) / 2))
+            detail = f"{voxels}, a voxel {px:.2g} px at the nearest point" if depth > 0 else voxels
+        # A small object is shown cut out and enlarged, its pixels as squares: aliasing stays visible.
+        images, k = enlarge(images, box)
+        if k > 1:
+            detail += f"; shown enlarged {k}x"
+        rows.append(FigureRow(title, f"{title}: {detail}", cam, voxels, panels))
+        strips.append(label_panels(images, [p.label for p in panels]))
+    note = (f"times: median of {FIGURE_FRAMES} frames at {args.size[0]}x{args.size[1]} on {r.gl.renderer}"
+            + ("; PSNR inside the object's screen box against the ground truth" if is_mesh else ""))  # fmt: skip
+    return Figure(_stack(strips, [row.title for row in rows], note), rows, _figure_lines(rows, args) + [note])
+
+
+def enlarge(images: list[np.ndarray], box: tuple[int, int, int, int]) -> tuple[list[np.ndarray], int]:
+    """Images of one size (H, W, C) cut to a window around ``box`` (x0, y0, x1,
+    y1) and enlarged by the largest whole factor k that still shows all of the
+    box, each pixel a k x k square, to (H, W, C) again; and k (1: unchanged)."""
+    h, w = images[0].shape[:2]
+    x0, y0, x1, y1 = box
+    k = max(1, min(w // max(x1 - x0, 1), h // max(y1 - y0, 1)))
+    if k == 1:
+        return images, 1
+    cw, ch = -(-w // k), -(-h // k)  # the window, rounded up to cover (W, H) once enlarged
+    left = min(max(0, (x0 + x1) // 2 - cw // 2), w - cw)
+    top = min(max(0, (y0 + y1) // 2 - ch // 2), h - ch)
+    out = [np.repeat(np.repeat(im[top : top + ch, left : left + cw], k, axis=0), k, axis=1)[:h, :w] for im in images]
+    return out, k
+
+
+def _stack(strips: list[np.ndarray], titles: list[str], note: str = "", gap: int = 8) -> np.ndarray:
+    """Rows of labelled panels one above the other on white, each under its
+    title, and a ``note`` line at the foot."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    h = max(s.shape[0] for s in strips)
+    font_px = max(12, h // 24)
+    try:
+        font = ImageFont.truetype("DejaVuSans.ttf", font_px)
+    except OSError:  # not installed: Pillow's own font, which has no superscripts
+        titles = [t.replace("³", "^3") for t in titles]
+        note = note.replace("³", "^3")
+        try:
+            font = ImageFont.load_default(size=font_px)
+        except TypeError:  # Pillow < 10.1 has one bitmap size
+            font = ImageFont.load_default()
+    title_h = int(font_px * 1.4) + gap
+    w = max(s.shape[1] for s in strips)
+    foot = title_h if note else 0
+    canvas = Image.new("RGB", (w, sum(s.shape[0] + title_h for s in strips) + foot), (255, 255, 255))
+    draw = ImageDraw.Draw(canvas)
+    y = 0
+    for strip, title in zip(strips, titles, strict=True):
+        draw.text((gap, y + gap), title, fill=(0, 0, 0), font=font)
+        canvas.paste(Image.fromarray(np.ascontiguousarray(strip)), (0, y + title_h))
+        y += title_h + strip.shape[0]
+    if note:
+        draw.text((gap, y), note, fill=(90, 90, 90), font=font.font_variant(size=max(10, font_px * 3 // 4))
+                  if hasattr(font, "font_variant") else font)  # fmt: skip
+    return np.asarray(canvas)
+
+
+def _figure_lines(rows: list[FigureRow], args) -> list[str]:
+    """The printed table: the rows' titles, then one line per panel kind with
+    each row's frame time and PSNR (and, with ``--lod``, each row's selection)."""
+    lines = [f"row {row.title}" for row in rows]
+    lines.append(f"{'':<28}" + "".join(f"{row.name:>12}{'':<19}" for row in rows).rstrip())
+    for i, first in enumerate(rows[0].panels):
+        cells = []
+        for row in rows:
+            p = row.panels[i]
+            cells.append(f"{p.ms:9.1f} ms" + (f"  PSNR {p.psnr:6.2f} dB" if p.psnr is not None else " " * 17))
+        line = f"{first.name:<28}" + "  ".join(cells).rstrip()
+        lods = [f"{row.name} {row.panels[i].lod}" for row in rows if row.panels[i].lod]
+        if lods:
+            line += "  " + "; ".join(lods)
+        lines.append(line)
+    if not any(p.psnr is not None for row in rows for p in row.panels):
+        lines.append("no polygon ground truth for this input: errors not measured")
+    return lines
 
 
 # ----------------------------------------------------------------------- frames
@@ -229,9 +422,11 @@ def cmd_frames(args) -> int:
     cams = turntable(camera, args.frames, args.degrees)
     progress = Progress("frames", enabled=None if not args.quiet else False)
     with Renderer(args.size, backend=args.backend) as r:
+        voxels = resolve_resolution(r, thing, method, cams, args)  # one texture for the whole path
         paths = r.render_path(thing, cams, folder, method, progress=progress, ssaa=args.ssaa,
                               **frame_options(method, args))  # fmt: skip
-    print(f"wrote {len(paths)} frames to {folder}/ ({paths[0].name} .. {paths[-1].name})")
+    print(f"wrote {len(paths)} frames to {folder}/ ({paths[0].name} .. {paths[-1].name})"
+          + (f", {voxels}" if voxels else ""))  # fmt: skip
     return 0
 
 

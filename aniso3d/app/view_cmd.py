@@ -14,7 +14,8 @@ from aniso3d.app.common import image_size, load_input, positive_int
 
 
 def register(sub) -> None:
-    from aniso3d.app.viewer import CONTROLS, DEFAULT_RESOLUTION, METHODS, QUALITIES, SPLATS
+    from aniso3d.app.render_cmd import AUTO, resolution_arg
+    from aniso3d.app.viewer import CONTROLS, METHODS, QUALITIES, SPLATS
     from aniso3d.build.scenes import SCENES
     from aniso3d.build.texture import DEFAULT_DIRECTIONS
 
@@ -36,8 +37,9 @@ def register(sub) -> None:
     p.add_argument("--size", type=image_size, default=(960, 640), help="window size, e.g. 1280x800")
     p.add_argument("--method", choices=METHODS, default=None,
                    help="renderer to start with (default: what the input is)")  # fmt: skip
-    p.add_argument("--resolution", "-r", type=positive_int, default=DEFAULT_RESOLUTION,
-                   help="voxels along the longest axis when a mesh is converted")  # fmt: skip
+    p.add_argument("--resolution", "-r", type=resolution_arg, default=AUTO,
+                   help="voxels along the longest axis when a mesh is converted, or 'auto' (default): "
+                        "as many as the start view needs (a power of two from 8 to 256); [ and ] step it")  # fmt: skip
     p.add_argument(
         "--directions", "-k", type=positive_int, default=DEFAULT_DIRECTIONS,
         help="sphere sample directions K"

@@ -22,6 +22,13 @@ two bounded caches (:class:`~aniso3d.rendering.cache.Cache`: host memory and GPU
 memory), which hold the things weakly: a thing that is garbage-collected takes
 what was made from it along.
 
+``resolution="auto"`` (a mesh drawn as volume or splats) converts it only as
+finely as the frame needs: :func:`~aniso3d.rendering.select.needed_resolution`
+of the camera, image size and mesh bounds (a power of two). A texture already
+built finer by a power of two is not rebuilt: the coarser one is the level of
+its pyramid, exact. :meth:`Renderer.render_path` takes the finest any of its
+cameras needs, for every frame.
+
 ``lod=True`` (methods "splat" and "volume", a mesh or texture) draws from the
 texture's exact pyramid (:mod:`aniso3d.build.pyramid`), built and uploaded once: splats
 select per frame, per region, the coarsest level whose voxels cover at most
@@ -35,7 +42,7 @@ from __future__ import annotations
 
 import os
 import time
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -60,8 +67,11 @@ from aniso3d.rendering.camera import Camera
 from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.frame import Frame, FrameView, view_depth
 from aniso3d.rendering.lighting import Lighting
+from aniso3d.rendering.select import needed_resolution
 
 METHODS = ("mesh", "volume", "splat")
+#: ``BuildOptions.resolution`` that asks for :func:`~aniso3d.rendering.select.needed_resolution`.
+AUTO = "auto"
 #: Default bounds of each of a renderer's two caches.
 CACHE_ENTRIES = 32
 CACHE_BYTES = 2 << 30
@@ -79,7 +89,10 @@ class BuildOptions:
     it uploads. Keys the conversion and upload caches.
 
     Attributes:
-        resolution: voxels along the longest axis of a mesh's texture.
+        resolution: voxels along the longest axis of a mesh's texture, or
+            "auto": as many as the frame needs (see the module docstring; a
+            camera is needed, so ``render``, ``render_frame`` and
+            ``render_path`` take it, ``upload`` and ``pyramid`` do not).
         directions: sphere sample directions K of a mesh's texture.
         placement: where a texture's points sit (``AnisoTexture.to_points``).
         per_entry: points per shading entry, a whole number or "adaptive".
@@ -87,7 +100,7 @@ class BuildOptions:
         lod: draw from the texture's pyramid (methods "splat" and "volume").
     """
 
-    resolution: int = DEFAULT_RESOLUTION
+    resolution: int | str = DEFAULT_RESOLUTION
     directions: int = DEFAULT_DIRECTIONS
     placement: str = "centroid"
     per_entry: int | str = 1
@@ -96,7 +109,8 @@ class BuildOptions:
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
-        set_(self, "resolution", _whole(self.resolution, "build option resolution (voxels)"))
+        if self.resolution != AUTO:
+            set_(self, "resolution", _whole(self.resolution, "build option resolution (voxels, or 'auto')"))
         set_(self, "directions", _whole(self.directions, "build option directions"))
         choice(self.placement, PLACEMENTS, "placement")
         choice(self.point_normal, POINT_NORMALS, "point normal")
@@ -247,7 +261,9 @@ class Renderer:
             raise InputError(
                 "level of detail needs a mesh or a texture: a point cloud has no texture pyramid"
             )
-        tex = self._convert(thing, "volume", BuildOptions.parse(**build))
+        b = BuildOptions.parse(**build)
+        self._concrete(thing, "volume", b, "pyramid")
+        tex = self._convert(thing, "volume", b)
         return self.conversions.get_or_make(tex, ("pyramid",), lambda: pyramid(tex))
 
     def upload(self, thing, method: str, build: BuildOptions | None = None, **values):
@@ -261,6 +277,7 @@ class Renderer:
             raise InputError(
                 f"level of detail applies to the splat and volume methods, not '{method}'"
             )
+        self._concrete(thing, method, b, "upload")
         # Only what changes the upload keys it.
         used = {"mesh": (), "volume": ("lod",), "splat": ("placement", "per_entry", "point_normal", "lod")}[method]
         if isinstance(thing, Mesh) and method != "mesh":
@@ -276,6 +293,42 @@ class Renderer:
             data = self._convert(thing, method, b)
         impl = self.method_renderer(method)
         return self.uploads.put(thing, key, impl.upload(data), release=self._releaser(impl))
+
+    @staticmethod
+    def _concrete(thing, method: str, build: BuildOptions, caller: str) -> None:
+        """An InputError where a mesh would be converted at resolution "auto"
+        without a camera to resolve it."""
+        if build.resolution == AUTO and isinstance(thing, Mesh) and method != "mesh":
+            raise InputError(
+                f"resolution 'auto' needs a camera: give {caller}() a number of voxels, "
+                "or draw with render(), render_frame() or render_path()"
+            )
+
+    def resolve_resolution(self, thing, cameras, size=None, directions: int = DEFAULT_DIRECTIONS) -> int:
+        """The resolution "auto" stands for when ``thing`` (a mesh) is seen by
+        ``cameras`` (one or a list) in images of ``size`` (default: the
+        renderer's): the finest :func:`~aniso3d.rendering.select.needed_resolution`
+        of them. The texture is made ready in the conversion cache: taken from
+        the pyramid of a texture built finer by a power of two if there is one
+        (every level is exact), else built."""
+        if not isinstance(thing, Mesh):
+            raise InputError(f"resolution 'auto' is for converting a mesh, got {type(thing).__name__}")
+        cams = [cameras] if isinstance(cameras, Camera) else list(cameras)
+        if not cams or not all(isinstance(c, Camera) for c in cams):
+            raise InputError("resolution 'auto' needs one or more aniso3d.Camera objects")
+        w, h = check_size(size or self.size)
+        res = max(needed_resolution(c, (w, h), thing.bounds) for c in cams)
+        key = ("texture", res, directions)
+        if self.conversions.get(thing, key) is None:
+            finer, k = None, 1
+            while finer is None and res << k <= 65536:
+                finer = self.conversions.get(thing, ("texture", res << k, directions))
+                k += 1
+            if finer is not None:
+                pyr = self.conversions.get_or_make(finer, ("pyramid",), lambda: pyramid(finer))
+                if len(pyr) >= k:
+                    self.conversions.put(thing, key, pyr[k - 1])
+        return res
 
     def _releaser(self, impl: MethodRenderer):
         def release(handle) -> None:
@@ -383,6 +436,8 @@ class Renderer:
             )
         names = BuildOptions.names()
         b = BuildOptions.resolve(build, {k: values.pop(k) for k in list(values) if k in names})
+        if b.resolution == AUTO and isinstance(thing, Mesh) and method != "mesh":
+            b = replace(b, resolution=self.resolve_resolution(thing, camera, (w, h), b.directions))
         if b.lod and method not in ("splat", "volume"):
             raise InputError(f"level of detail applies to the splat and volume methods, not '{method}'")
         if not b.lod and values.get("pixel_error", getattr(options, "pixel_error", None)) is not None:
@@ -431,6 +486,16 @@ class Renderer:
         """Render one frame per camera to numbered PNG files in ``folder``."""
         from aniso3d.rendering.images import save_png
 
+        build = options.get("build")
+        resolution = build.resolution if isinstance(build, BuildOptions) else options.get("resolution")
+        if resolution == AUTO and isinstance(thing, Mesh) and method not in (None, "mesh") and cameras:
+            # One texture for the whole path: the finest any frame needs.
+            dirs = build.directions if isinstance(build, BuildOptions) else options.get("directions")
+            res = self.resolve_resolution(thing, cameras, options.get("size"), dirs or DEFAULT_DIRECTIONS)
+            if isinstance(build, BuildOptions):
+                options["build"] = replace(build, resolution=res)
+            else:
+                options["resolution"] = res
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
         paths = []

@@ -1,6 +1,8 @@
 """What each renderer draws for the viewer's current settings, and getting it
 made: data keys, the conversion jobs run on the :class:`Builder` thread, and
-a small cache of finished conversions for switching back.
+the finished conversions kept for switching back, in a
+:class:`~aniso3d.rendering.cache.Cache` (the window shares the
+:class:`~aniso3d.rendering.renderer.Renderer`'s conversion cache).
 
 A data key is a tuple naming one value:
 
@@ -17,7 +19,6 @@ from __future__ import annotations
 
 import sys
 import traceback
-from collections import OrderedDict
 from dataclasses import dataclass
 
 from aniso3d.app.viewer.state import ViewState
@@ -27,9 +28,11 @@ from aniso3d.build.points import PointCloud
 from aniso3d.build.pyramid import LodPoints, Pyramid, pyramid
 from aniso3d.build.texture import AnisoTexture, build_texture
 from aniso3d.errors import InputError
+from aniso3d.rendering.cache import Cache
 
-#: Converted textures and point clouds kept for switching back (oldest dropped first).
-CACHE_ENTRIES, CACHE_BYTES = 8, 1 << 30
+#: Bounds of the viewer's caches (conversions kept for switching back, and
+#: uploads): entries, and bytes in all; least recently used out first.
+CACHE_ENTRIES, CACHE_BYTES = 16, 1 << 30
 
 
 def describe_data(data) -> str:
@@ -71,13 +74,18 @@ class Collected:
 
 class Conversions:
     """The data behind the viewer's input ``thing``: the input itself, and what
-    was converted from it, made on demand by one background :class:`Builder`."""
+    was converted from it, made on demand by one background :class:`Builder`.
 
-    def __init__(self, thing, kind: str):
+    Finished conversions go to ``cache`` (default: a new
+    :class:`~aniso3d.rendering.cache.Cache` of :data:`CACHE_ENTRIES` and
+    :data:`CACHE_BYTES`) under (``thing``, data key); the window passes the
+    renderer's, so the two share one budget."""
+
+    def __init__(self, thing, kind: str, cache: Cache | None = None):
         self.thing, self.kind = thing, kind
         self.builder = Builder()
         self._sources = {(kind,): thing}  # the input, under ("mesh",), ("texture",) or ("points",)
-        self._cache: OrderedDict[tuple, object] = OrderedDict()  # built textures and points, LRU
+        self.cache = cache if cache is not None else Cache(CACHE_ENTRIES, CACHE_BYTES, "viewer conversions")
         #: Why a build failed, by data key; not retried: the settings must change first.
         self.failed: dict[tuple, str] = {}
 
@@ -125,10 +133,7 @@ class Conversions:
         """The value of ``key`` if it is at hand (the input, or built and cached), else None."""
         if key in self._sources:
             return self._sources[key]
-        value = self._cache.get(key)
-        if value is not None:
-            self._cache.move_to_end(key)
-        return value
+        return self.cache.get(self.thing, key)
 
     # --------------------------------------------------------------- builds
 
@@ -206,13 +211,8 @@ class Conversions:
                 msg = f"{type(exc).__name__}: {exc}"
             self.failed[self.builder.key] = msg
             return Collected(f"building {label} failed: {msg}", error=True)
-        for key, value in results.items():
-            self._cache[key] = value
-            self._cache.move_to_end(key)
-        # Keep recent conversions for quick switching back, within a memory budget.
-        while len(self._cache) > 2 and (
-            len(self._cache) > CACHE_ENTRIES
-            or sum(getattr(v, "nbytes", 0) for v in self._cache.values()) > CACHE_BYTES
-        ):
-            self._cache.popitem(last=False)
+        # The wanted value last: the most recently used, the last to be evicted.
+        key = self.builder.key
+        for k in sorted(results, key=lambda k: k == key):
+            self.cache.put(self.thing, k, results[k])
         return Collected(f"built {label} in {seconds:.2f} s: {describe_data(results[self.builder.key])}")

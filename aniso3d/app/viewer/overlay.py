@@ -16,6 +16,7 @@ import numpy as np
 from aniso3d.app.viewer.scene import Frame
 from aniso3d.app.viewer.state import CONTROLS, METHOD_LABELS, METHODS, ViewState
 from aniso3d.rendering.context import GLContext
+from aniso3d.rendering.frame import DrawStats
 from aniso3d.rendering.select import describe_stats
 
 Color = tuple[int, int, int]
@@ -91,14 +92,24 @@ def status_lines(name: str, state: ViewState, frame: Frame, timing: str, size: t
     if frame.shown is not None:
         old = " (previous settings)" if frame.state == "stale" else ""
         lines.append((f"drawing {frame.shown.counts}{old}", WHITE))
-        lod = describe_stats(getattr(frame.shown.handle, "last_stats", None))
-        if lod:
-            lines.append((lod, WHITE))
+        lines += [(text, WHITE) for text in stats_lines(frame.stats)]
     if building:
         lines.append((building, YELLOW))
     if notice is not None:
         lines.append(notice)
     return lines
+
+
+def stats_lines(stats: DrawStats | None) -> list[str]:
+    """What the last draw says it drew, where it drew from a pyramid: the
+    primitives and levels of the frame, and the selection
+    (:func:`~aniso3d.rendering.select.describe_stats`); nothing otherwise."""
+    if stats is None or not stats.levels:
+        return []
+    levels = " ".join(str(level) for level in stats.levels)
+    lines = [f"this frame {stats.drawn:,} {stats.unit} from level{'s' if len(stats.levels) > 1 else ''} {levels}"]
+    lod = describe_stats(stats.lod)
+    return lines + ([lod] if lod else [])
 
 
 def key_lines(font, width_px: float) -> list[tuple[str, Color]]:

@@ -2,15 +2,20 @@
 drawn through the :class:`~aniso3d.rendering.renderer.Renderer`'s per-method
 renderers into an offscreen framebuffer that the window shows with one quad.
 
-Data is uploaded once per method when it becomes ready and kept until newer
-data replaces it, so the previous image stays while a rebuild runs. A renderer
-that fails to start, to take its data, or to draw is reported in the frame
-(and its traceback on stderr) instead of taking the window down.
+Uploads go to the renderer's upload cache
+(:class:`~aniso3d.rendering.cache.Cache`, keyed by the data uploaded, released
+through the method renderer when they leave it): data is uploaded once per
+method when it becomes ready, found again when the user switches back, and a
+method keeps drawing its previous data while a rebuild runs. Each frame's
+draw options are the method renderer's own ``Options`` dataclass, built from
+the fields it declares, and its :class:`~aniso3d.rendering.frame.DrawStats`
+go to the overlay. A renderer that fails to start, to take its data, or to
+draw is reported in the frame (and its traceback on stderr) instead of taking
+the window down.
 """
 
 from __future__ import annotations
 
-import inspect
 import sys
 import time
 import traceback
@@ -20,18 +25,21 @@ import moderngl
 import numpy as np
 
 from aniso3d.app.viewer.data import Conversions, describe_data, describe_key
-from aniso3d.app.viewer.state import METHOD_LABELS, ViewState, settings_text
+from aniso3d.app.viewer.state import METHOD_LABELS, Settings, ViewState, settings_text
+from aniso3d.rendering.base import DrawOptions, MethodRenderer
 from aniso3d.rendering.context import GLContext
-from aniso3d.rendering.frame import FrameView
+from aniso3d.rendering.frame import DrawStats, FrameView
 from aniso3d.rendering.renderer import Renderer
 
 
 @dataclass
 class Shown:
-    """A method's uploaded data: its key, GPU handle, renderer and a count for the overlay."""
+    """What a method shows: the data key, the data itself (held, so that its
+    upload stays in the cache's reach while it is shown), the method renderer
+    and a count for the overlay."""
 
     key: tuple
-    handle: object
+    data: object
     impl: object
     counts: str
 
@@ -40,28 +48,25 @@ class Shown:
 class Frame:
     """What the scene shows: state is ready, stale (older settings while a
     build runs), building, unavailable (the method cannot draw this input)
-    or failed; message says why."""
+    or failed; message says why; stats is what the last draw returned."""
 
     state: str
     impl: object = None
     shown: Shown | None = None
     message: str = ""
     key: tuple | None = None  # the data being built, when building
+    stats: DrawStats | None = None
 
 
-def takes_option(impl, name: str) -> bool:
-    """Whether a per-method renderer takes draw option ``name``: a named
-    parameter of its ``draw``, or of its ``options`` (renderers whose ``draw``
-    passes ``**options`` on to a validating ``options`` method)."""
-    named = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
-    for func in (getattr(impl, "draw", None), getattr(impl, "options", None)):
-        try:
-            param = inspect.signature(func).parameters.get(name)
-        except (TypeError, ValueError):
-            continue
-        if param is not None and param.kind in named:
-            return True
-    return False
+def draw_options(impl: MethodRenderer, settings: Settings) -> tuple[DrawOptions, int]:
+    """The method renderer's ``Options`` for the viewer's settings, made from
+    the fields it declares (``splat``, ``quality``), and the supersampling the
+    viewer adds for "high" quality where the renderer has no quality option of
+    its own (the polygons: 2x2 samples per pixel)."""
+    names = impl.Options.names()
+    values = {name: getattr(settings, name) for name in ("splat", "quality") if name in names}
+    ssaa = 2 if settings.quality == "high" and "quality" not in names else 1
+    return impl.Options(**values), ssaa
 
 
 class SceneView:
@@ -117,25 +122,48 @@ class SceneView:
         data = self.data.lookup(key)
         failed = self.data.failed.get(key) or self._upload_errors.get((method, key))
         if data is not None and (shown is None or shown.key != key) and failed is None:
-            label = METHOD_LABELS[method]
             try:
-                t0 = time.perf_counter()
-                handle = impl.upload(data)
-                self._say(f"uploaded {describe_key(key)} for {label} in {time.perf_counter() - t0:.2f} s")
+                self.handle(method, impl, data, key)
             except Exception as exc:  # not retried: the settings must change first
                 traceback.print_exc(file=sys.stderr)
                 failed = self._upload_errors[(method, key)] = (
-                    f"the {label} renderer could not take the {describe_key(key)}: {type(exc).__name__}: {exc}"
+                    f"the {METHOD_LABELS[method]} renderer could not take the {describe_key(key)}: "
+                    f"{type(exc).__name__}: {exc}"
                 )
             else:
-                if shown is not None:
-                    shown.impl.release(shown.handle)
-                shown = self._shown[method] = Shown(key, handle, impl, describe_data(data))
+                shown = self._shown[method] = Shown(key, data, impl, describe_data(data))
         if failed is not None and (shown is None or shown.key != key):
             return Frame("failed", impl, message=failed)
         if shown is None:
             return Frame("building", impl, message=f"building the {describe_key(key)}…", key=key)
         return Frame("stale" if shown.key != key else "ready", impl, shown)
+
+    def handle(self, method: str, impl: MethodRenderer, data, key: tuple):
+        """The GPU handle of ``data`` for ``method``: from the renderer's upload
+        cache, or uploaded now (and logged) if it is not there (first use, or
+        evicted since)."""
+        uploads = self.renderer.uploads
+        ukey = ("viewer upload", method)
+        handle = uploads.get(data, ukey)
+        if handle is None:
+            t0 = time.perf_counter()
+            handle = uploads.put(data, ukey, impl.upload(data), release=self._releaser(impl))
+            self._say(
+                f"uploaded {describe_key(key)} for {METHOD_LABELS[method]} in {time.perf_counter() - t0:.2f} s"
+            )
+        return handle
+
+    def _releaser(self, impl: MethodRenderer):
+        def release(handle) -> None:
+            if self.gl.ctx is not None:  # a context released first took its objects along
+                impl.release(handle)
+
+        return release
+
+    def collect(self) -> None:
+        """Once per frame: release the uploads of data no longer held anywhere."""
+        self.renderer.uploads.collect()
+        self.data.cache.collect()
 
     def _target(self, size: tuple[int, int]) -> moderngl.Framebuffer:
         if self.fbo is not None and self._size == size:
@@ -151,18 +179,6 @@ class SceneView:
         self._size = size
         return self.fbo
 
-    def _draw_options(self, impl, quality: str, splat: str) -> tuple[dict, int]:
-        """Options the renderer takes, and the supersampling the viewer adds
-        for "high" quality where the renderer has no quality option of its own
-        (the polygons: 2x2 samples per pixel)."""
-        options = {}
-        if takes_option(impl, "splat"):
-            options["splat"] = splat
-        if takes_option(impl, "quality"):
-            options["quality"] = quality
-            return options, 1
-        return options, 2 if quality == "high" else 1
-
     def render(self, state: ViewState, size: tuple[int, int]) -> Frame:
         """Draw the view for a window of ``size`` (w, h) pixels; logs the settled state when it changes."""
         w, h = size
@@ -170,7 +186,7 @@ class SceneView:
             return self.frame
         s = state.settings
         frame = self.current(state)
-        options, ssaa = self._draw_options(frame.impl, s.quality, s.splat) if frame.shown is not None else ({}, 1)
+        options, ssaa = draw_options(frame.impl, s) if frame.shown is not None else (None, 1)
         if max(w, h) * ssaa > min(self.gl.max_texture_size, *self.gl.max_viewport):
             ssaa = 1
         fsize = (w * ssaa, h * ssaa)
@@ -180,12 +196,15 @@ class SceneView:
         bg = self.renderer.lighting.background
         fbo.clear(bg[0], bg[1], bg[2], 0.0, depth=1.0)
         if frame.shown is not None:
-            camera = state.orbit.camera()
-            near, far = camera.clip_range(getattr(frame.shown.handle, "bounds", self.bounds))
-            view = FrameView(camera, self.renderer.lighting, fsize, near, far, ssaa)
+            shown = frame.shown
             try:
+                handle = self.handle(s.method, shown.impl, shown.data, shown.key)
+                camera = state.orbit.camera()
+                near, far = camera.clip_range(handle.bounds)
+                view = FrameView(camera, self.renderer.lighting, fsize, near, far, ssaa)
+                fbo.use()
                 t0 = time.perf_counter()
-                frame.impl.draw(frame.shown.handle, view, fbo=fbo, **options)
+                frame.stats = shown.impl.draw(handle, view, fbo=fbo, options=options)
                 self.gl.ctx.finish()  # time the whole frame, not just queueing its commands
                 ms = 1000.0 * (time.perf_counter() - t0)
                 self.frame_ms = ms if self.frame_ms is None else 0.7 * self.frame_ms + 0.3 * ms
@@ -221,7 +240,7 @@ class SceneView:
         return None if self.fbo is None else self.fbo.color_attachments[0]
 
     def release(self) -> None:
-        """Release the uploads (the framebuffer goes with the GLContext)."""
-        for shown in self._shown.values():
-            shown.impl.release(shown.handle)
+        """Forget what is shown; the uploads are the renderer's to release
+        (:meth:`Renderer.release <aniso3d.rendering.renderer.Renderer.release>`),
+        the framebuffer goes with the GLContext."""
         self._shown.clear()

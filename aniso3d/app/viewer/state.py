@@ -20,6 +20,7 @@ from aniso3d.build.points import PointCloud
 from aniso3d.build.texture import DEFAULT_DIRECTIONS, PLACEMENTS, AnisoTexture
 from aniso3d.errors import InputError
 from aniso3d.rendering.camera import Camera
+from aniso3d.rendering.select import needed_resolution
 
 METHODS = ("mesh", "volume", "splat")
 METHOD_LABELS = {"mesh": "polygons", "volume": "volume", "splat": "splats"}
@@ -28,6 +29,9 @@ QUALITIES = ("fast", "high")
 #: Voxels along the longest axis that ``[`` and ``]`` step through.
 RESOLUTIONS = (8, 16, 24, 32, 48, 64, 96, 128, 192, 256)
 DEFAULT_RESOLUTION = 64
+#: ``Settings.resolution`` that :meth:`ViewState.resolve_resolution` turns into
+#: the resolution the start view needs.
+AUTO = "auto"
 
 #: Start view, from the direction of ``aniso3d render``'s default camera: azimuth about +y from +z
 #: towards +x, elevation above the horizon, degrees.
@@ -184,7 +188,7 @@ class Settings:
     splat: str = "disc"
     quality: str = "fast"
     placement: str = "centroid"
-    resolution: int = DEFAULT_RESOLUTION
+    resolution: int | str = DEFAULT_RESOLUTION  # or "auto": see ViewState.resolve_resolution
     directions: int = DEFAULT_DIRECTIONS
     turntable: bool = False
     overlay: bool = True
@@ -240,6 +244,21 @@ class ViewState:
         if state.kind == "texture":
             state.settings.resolution, state.settings.directions = thing.resolution, thing.n_directions
         return state
+
+    def resolve_resolution(self, size: tuple[int, int]) -> str | None:
+        """Turn a resolution of "auto" into the one the current view needs in a
+        window of ``size`` (w, h) pixels
+        (:func:`~aniso3d.rendering.select.needed_resolution`: a power of two, so
+        one of :data:`RESOLUTIONS`, which ``[`` and ``]`` step from); the line
+        to log, or None when the resolution was a number already."""
+        if self.settings.resolution != AUTO:
+            return None
+        if self.kind != "mesh":  # nothing is converted: a texture keeps its own, points have none
+            self.settings.resolution = DEFAULT_RESOLUTION
+            return None
+        res = needed_resolution(self.orbit.camera(), size, self.orbit.bounds)
+        self.settings.resolution = res
+        return f"voxels {res}³ (auto: a voxel about a pixel at the nearest point of the start view)"
 
     @property
     def lod(self) -> bool:

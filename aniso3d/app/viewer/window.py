@@ -29,7 +29,7 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
-from aniso3d.app.viewer.data import Conversions
+from aniso3d.app.viewer.data import CACHE_BYTES, CACHE_ENTRIES, Conversions
 from aniso3d.app.viewer.overlay import GREEN, MARGIN, RED, WHITE, YELLOW, Overlay, key_lines, status_lines, wrap
 from aniso3d.app.viewer.scene import SceneView
 from aniso3d.app.viewer.state import KEYS, Settings, ViewState
@@ -125,13 +125,16 @@ class Viewer:
         if not self.screenshot_dir.is_dir():
             raise InputError(f"screenshot folder '{self.screenshot_dir}' does not exist; create it first")
         self.out = out or sys.stdout
-        self.data = Conversions(thing, self.state.kind)
         self.window, self.ctx = open_window(size, f"aniso3d view — {name}")
         try:
             self.gl = GLContext.wrap(self.ctx)
-            self.renderer = Renderer(self.window.get_framebuffer_size(), gl=self.gl)
+            # One conversion cache and one upload cache, the renderer's, for the whole viewer.
+            self.renderer = Renderer(self.window.get_framebuffer_size(), gl=self.gl,
+                                     cache_entries=CACHE_ENTRIES, cache_bytes=CACHE_BYTES)  # fmt: skip
+            self.data = Conversions(thing, self.state.kind, self.renderer.conversions)
             w, h = self.window.get_framebuffer_size()
             self.state.orbit.reset(w / max(h, 1))
+            auto = self.state.resolve_resolution((w, h))
             self.scene = SceneView(self.gl, self.renderer, self.data, self.state.orbit.bounds, self._say)
             self.overlay = Overlay(self.gl, scale=w / max(self.window.width, 1))
             self._install_handlers()
@@ -145,6 +148,8 @@ class Viewer:
         self._frames = 0  # frames presented
         self._unpresented = False  # a line was logged since the last "frame N presented"
         self._say(f"window {self.window.width}x{self.window.height}, OpenGL {self.gl.version} ({self.gl.renderer})")
+        if auto:
+            self._say(auto)
 
     # ------------------------------------------------------------- events
 
@@ -331,6 +336,7 @@ class Viewer:
                     else:
                         self._say(done.text)
                     self._dirty = True
+                self.scene.collect()
                 started = self.data.schedule(state)
                 if started is not None:
                     self._say(f"building {started}")
