@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aniso3d.bench.settings import Settings
+from aniso3d.metrics import screen_box
 from aniso3d.rendering.camera import Camera
 
 
@@ -42,25 +43,10 @@ def crop_box(
     camera: Camera, bounds: np.ndarray, size: tuple[int, int], margin: int = 8, min_side: int = 16
 ) -> tuple[int, int, int, int]:
     """Pixel box (x0, y0, x1, y1) around the projection of the 8 corners of
-    ``bounds`` (2 x 3, world units), grown by ``margin``, clamped to the image,
-    at least ``min_side`` pixels a side (SSIM needs 11)."""
+    ``bounds`` (2 x 3, world units): :func:`aniso3d.metrics.screen_box`."""
     b = np.asarray(bounds, dtype=np.float64)
     corners = np.array([[b[i, 0], b[j, 1], b[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
-    xy = camera.project(corners, size, bounds)
-    w, h = size
-    x0, y0 = np.floor(xy.min(axis=0)) - margin
-    x1, y1 = np.ceil(xy.max(axis=0)) + margin
-    box = []
-    for lo, hi, n in ((x0, x1, w), (y0, y1, h)):
-        lo, hi = int(max(0, lo)), int(min(n, hi))
-        side = min(n, max(min_side, hi - lo))
-        if hi - lo < side:
-            mid = (lo + hi) // 2
-            lo = max(0, min(n - side, mid - side // 2))
-            hi = lo + side
-        box.append((lo, hi))
-    (x0, x1), (y0, y1) = box
-    return x0, y0, x1, y1
+    return screen_box(camera.project(corners, size, bounds), size, margin, min_side)
 
 
 def make_cameras(bounds: np.ndarray, settings: Settings) -> list[CameraSpec]:
