@@ -173,6 +173,7 @@ def bench_plane(n: int, queries: int, k: int, factors) -> list[str]:
     rows = [f"{n:,} random points on a periodic square, spacing from k = {k}; median spacing "
             f"{np.median(spacing) / s:.3f} / sqrt(area per point); {queries:,} test points", "",
             "| drawn disc radius / spacing | uncovered fraction of the plane |", "| ---: | ---: |"]  # fmt: skip
+    print("\n".join(rows), flush=True)
     for c, u in zip(factors, uncovered, strict=True):
         frac = u / queries
         rows.append(f"| {c:.2f} | {frac:.1e}{' (none of ' + format(queries, ',') + ')' if u == 0 else ''} |")
@@ -213,7 +214,8 @@ def bench_holes(counts, size: int, images: Path | None) -> list[str]:
     r = MAJOR + MINOR
     bounds = np.array([[-r, -MINOR, -r], [r, MINOR, r]])
     az, el = np.radians(AZIMUTH), np.radians(ELEVATION)
-    cam = Camera.fit(bounds, direction=(np.sin(az) * np.cos(el), np.sin(el), np.cos(az) * np.cos(el)))
+    cam = Camera.fit(bounds, direction=(np.sin(az) * np.cos(el), np.sin(el), np.cos(az) * np.cos(el)),
+                     points=mesh.vertices[::7])  # fmt: skip
     rows = ["| points | areas | quality | background (alpha 0) | mostly background (alpha < 1/2) | "
             "overhang | load time s | frame ms |",
             "| ---: | --- | --- | ---: | ---: | ---: | ---: | ---: |"]  # fmt: skip

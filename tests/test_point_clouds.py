@@ -347,3 +347,32 @@ def test_random_samples_render_without_holes(rend, tmp_path, shape, n):
         assert not holes.any(), (quality, int(holes.sum()), np.argwhere(holes)[:5])
         img = rend.render(small, cam, "splat", alpha=True, splat="disc", quality=quality)
         assert (inner & (img[..., 3] < 255)).sum() > 0.002 * inner.sum(), quality
+
+
+# ---------------------------------------------------------------------- CLI
+
+
+@pytest.mark.gpu
+def test_render_command_point_cloud_options(rend, tmp_path, capsys):
+    from aniso3d.app.cli import main
+    from aniso3d.render.images import load_png
+
+    pos, nrm, mesh = random_plane(800, seed=4)
+    plain = write_cloud(tmp_path / "plain.ply", pos)
+    args = ["render", str(plain), "--size", "64", "--method", "splat", "--quality", "fast"]
+    # no normals: one line, status 2, the way out named
+    assert main([*args, "-o", str(tmp_path / "a.png")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "no normals" in err and "--estimate-normals" in err
+    assert main([*args, "--estimate-normals", "-o", str(tmp_path / "b.png")]) == 0
+    # a radius a tenth of the spacing's leaves most of the plane empty
+    assert main([*args, "--estimate-normals", "--splat-scale", "0.1", "-o", str(tmp_path / "c.png")]) == 0
+    assert main([*args, "--estimate-normals", "--splat-size", "0.2", "-o", str(tmp_path / "d.png")]) == 0
+    bg = [int((load_png(tmp_path / f"{n}.png") == load_png(tmp_path / "c.png")[0, 0]).all(-1).sum())
+          for n in "bcd"]  # fmt: skip
+    assert bg[1] > bg[0] + 500 and bg[2] < bg[0], bg
+    # the options belong to point clouds only
+    mesh.to_trimesh().export(tmp_path / "quad.ply")
+    capsys.readouterr()
+    assert main(["render", str(tmp_path / "quad.ply"), "--splat-size", "1", "-o", str(tmp_path / "e.png")]) == 2
+    assert "--splat-size is for PLY point clouds only" in capsys.readouterr().err

@@ -4,7 +4,8 @@ A :class:`PointCloud` is a plain data object: each point is a small oriented
 surface element with an area and a Phong material. aniso3d makes them from an
 :class:`~aniso3d.build.texture.AnisoTexture` (``texture.to_points()``), and reads and
 writes them as binary PLY that other tools (trimesh, MeshLab, CloudCompare)
-open.
+open, and reads the point clouds those tools, scanners and Gaussian-splatting
+programs write (:meth:`PointCloud.load_ply`, docs/point_clouds.md).
 """
 
 from __future__ import annotations
@@ -32,8 +33,10 @@ class PointCloud:
         positions: (N, 3) float64, world units.
         normals: (N, 3) float32 unit normals (lighting is two-sided, so the sign
             only matters for point placement, not shading).
-        areas: (N,) float64 splat area in world units squared; the areas of the
-            points made from a texture sum to the mesh's area.
+        areas: (N,) float64 splat area in world units squared (a splat's
+            radius is ``sqrt(area / pi)``); the areas of the points made from
+            a texture sum to the mesh's area; a cloud read without sizes gets
+            overlapping splats from its spacing (:mod:`aniso3d.build.spacing`).
         kd: (N, 3) float32 diffuse reflectance in [0, 1].
         ks: (N,) float32 specular coefficient.
         shininess: (N,) float32 Phong exponent.
@@ -189,12 +192,14 @@ class PointCloud:
         if splat_size is not None and default_area is not None:
             raise InputError("give splat_size (a radius) or default_area, not both")
         try:
-            vertex = plyfile.PlyData.read(str(p), mmap=False)["vertex"].data
+            # Mapped (copy-on-write), binary bodies are read as one array; without
+            # the map plyfile reads them value by value (25 s for 1M points).
+            vertex = plyfile.PlyData.read(str(p), mmap="c")["vertex"].data
         except Exception as exc:  # plyfile raises several types for damaged files
             raise FormatError(f"could not read PLY '{p}': {type(exc).__name__}: {exc}") from None
 
-        def col(name):
-            return np.asarray(vertex[name], dtype=np.float64).reshape(-1)
+        def col(name):  # a copy, so that nothing keeps the file mapped
+            return np.array(vertex[name], dtype=np.float64).reshape(-1)
 
         pos = np.stack([col("x"), col("y"), col("z")], axis=1)
         n = len(pos)
@@ -271,7 +276,7 @@ def _colours(vertex: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
     """(N, 3) float64 colours in [0, 1] from three colour properties:
     integers over their type's maximum, floats as they are (over 255 if any
     exceeds 1)."""
-    rgb = np.stack([np.asarray(vertex[c], dtype=np.float64).reshape(-1) for c in names], axis=1)
+    rgb = np.stack([np.array(vertex[c], dtype=np.float64).reshape(-1) for c in names], axis=1)
     dtype = vertex.dtype[names[0]]
     if np.issubdtype(dtype, np.integer):
         return rgb / float(np.iinfo(dtype).max)
