@@ -129,6 +129,16 @@ def test_pca_normals_on_a_sphere():
     assert np.median(angle) < 0.6 and angle.max() < 4.0, (np.median(angle), angle.max())
 
 
+def test_without_scipy_the_grid_hash_answers(monkeypatch):
+    import aniso3d.build.spacing as spacing
+
+    p = np.random.default_rng(4).random((500, 3))
+    calls = []
+    monkeypatch.setattr(spacing, "have_kdtree", lambda: False)
+    monkeypatch.setattr(spacing, "knn_grid", lambda *a: calls.append(a) or ("grid", None))
+    assert spacing.nearest_neighbours(p, 8)[0] == "grid" and len(calls) == 1
+
+
 def test_spacing_needs_enough_points():
     with pytest.raises(InputError, match="at least 9 points"):
         nearest_neighbours(np.zeros((5, 3)), 8)
@@ -376,3 +386,14 @@ def test_render_command_point_cloud_options(rend, tmp_path, capsys):
     capsys.readouterr()
     assert main(["render", str(tmp_path / "quad.ply"), "--splat-size", "1", "-o", str(tmp_path / "e.png")]) == 2
     assert "--splat-size is for PLY point clouds only" in capsys.readouterr().err
+
+
+def test_view_command_takes_the_point_cloud_options():
+    from aniso3d.app.cli import build_parser
+    from aniso3d.app.common import point_cloud_options
+
+    args = build_parser().parse_args(["view", "c.ply", "--splat-size", "0.1", "--estimate-normals"])
+    assert point_cloud_options(args) == {"splat_size": 0.1, "estimate_normals": True}
+    args = build_parser().parse_args(["frames", "c.ply", "--splat-scale", "2"])
+    assert point_cloud_options(args) == {"splat_scale": 2.0}
+    assert point_cloud_options(build_parser().parse_args(["render", "c.ply"])) == {}

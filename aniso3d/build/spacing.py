@@ -31,17 +31,19 @@ Splat radius
     fraction of the plane that no drawn disc covers is 1.5e-2 for drawn
     discs of one spacing, 1.3e-3 at 1.25, 6.6e-5 at 1.5, 6e-7 at 1.8 and
     none found at 1.9: a drawn radius of 1.875 spacings (``COVERAGE = 1.5``)
-    leaves well under one pixel in a million open. On a regular grid of
+    leaves under one pixel in a million open. On a regular grid of
     spacing ``s`` the radius is ``1.5 * 1.023 s = 1.53 s``: more overlap
     than a grid needs, the price of covering random samples.
 
 Neighbour search
     Exact, by a k-d tree (:class:`scipy.spatial.cKDTree`) when scipy is
     installed, else by an exact grid hash in NumPy (:func:`knn_grid`, no
-    dependency). Measured on 100k and 1M points of a noisy torus (k = 8,
-    docs/point_clouds.md) the tree is several times faster at a similar
-    peak memory, so it is the default; the grid hash gives the same
-    neighbours and keeps aniso3d working without scipy.
+    dependency). Measured on a noisy torus, k = 8 (``demos/bench_point_holes.py
+    --knn``, docs/point_clouds.md): 1M points take the tree 2.3 s of CPU and
+    316 MiB at peak, the grid 6.7 s and 493 MiB; 100k points 0.39 s and
+    57 MiB against 0.62 s and 143 MiB. So the tree is the default (scipy is
+    the ``points`` extra); the grid hash finds the same neighbours and keeps
+    aniso3d whole without scipy, at about three times the time.
 """
 
 from __future__ import annotations
@@ -60,7 +62,7 @@ DEFAULT_K = 8
 COVERAGE = 1.5
 
 #: Largest number of candidate pairs the grid hash holds at once (memory:
-#: about 40 bytes a pair).
+#: about 80 bytes a pair).
 GRID_PAIR_BUDGET = 1_000_000
 
 # The 27 cells of a 3 x 3 x 3 block around a cell, as (27, 3) offsets.
