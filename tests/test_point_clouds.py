@@ -287,6 +287,12 @@ def test_degenerate_spacing(tmp_path):
     two = PointCloud.load_ply(write_cloud(tmp_path / "two.ply", np.array([[0, 0, 0], [0.3, 0, 0.4]]),
                                           np.tile([0, 0, 1.0], (2, 1))))  # fmt: skip
     np.testing.assert_allclose(two.areas, np.pi * (COVERAGE * math.sqrt(2 * math.pi * 0.25 / 2)) ** 2)
+    rgb = np.full(12, 0.5, np.float32)
+    rgb[3] = np.nan
+    path = write_cloud(tmp_path / "nanrgb.ply", np.random.default_rng(0).random((12, 3)), np.tile([0, 0, 1.0], (12, 1)),
+                       {"red": rgb, "green": rgb, "blue": rgb})  # fmt: skip
+    with pytest.raises(InputError, match="1 points with NaN or Inf colours"):
+        PointCloud.load_ply(path)
     nan = np.r_[np.array([[0, 0, np.nan]]), np.random.default_rng(0).random((11, 3))]
     with pytest.raises(InputError, match="1 points with NaN or Inf coordinates"):
         PointCloud.load_ply(write_cloud(tmp_path / "nan.ply", nan, np.tile([0, 0, 1.0], (12, 1))))

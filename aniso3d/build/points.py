@@ -235,6 +235,9 @@ class PointCloud:
             kd = 0.5 + SH_C0 * np.stack([col(c) for c in layout.sh_colour], axis=1)
         else:
             kd = np.tile(DEFAULT_KD, (n, 1))
+        if not np.isfinite(kd).all():
+            bad = int((~np.isfinite(kd).all(axis=1)).sum())
+            raise InputError(f"'{p}' has {bad} points with NaN or Inf colours; fix or drop its colour properties")
         ks = col("ks") if "ks" in names else np.full(n, DEFAULT_KS)
         sh = col("shininess") if "shininess" in names else np.full(n, DEFAULT_SHININESS)
 
