@@ -77,14 +77,44 @@ class Progress:
         self.stream.flush()
 
 
-def load_input(path: str | None, scene_options: dict | None = None):
+def add_point_cloud_options(p: argparse.ArgumentParser) -> None:
+    """The options of a PLY point-cloud input (see :func:`point_cloud_options`)."""
+    g = p.add_argument_group("point-cloud inputs (PLY without faces)")
+    g.add_argument("--splat-size", type=positive_float, default=None, metavar="RADIUS",
+                   help="one splat radius for every point, world units (default: the file's "
+                        "area/radius/scale properties, else each point's from its 8 nearest neighbours)")
+    g.add_argument("--splat-scale", type=positive_float, default=None, metavar="FACTOR",
+                   help="multiply every splat radius (>1 closes holes, <1 sharpens)")
+    g.add_argument("--estimate-normals", action="store_true",
+                   help="fit the normals a file lacks to the 8 nearest neighbours (PCA)")
+
+
+def point_cloud_options(args: argparse.Namespace) -> dict:
+    """The point-cloud options given on the command line, as keyword arguments
+    of :meth:`~aniso3d.build.points.PointCloud.load_ply` (only those set)."""
+    opts = {
+        "splat_size": getattr(args, "splat_size", None),
+        "splat_scale": getattr(args, "splat_scale", None),
+        "estimate_normals": getattr(args, "estimate_normals", False) or None,
+    }
+    return {k: v for k, v in opts.items() if v is not None}
+
+
+def load_input(path: str | None, scene_options: dict | None = None, point_options: dict | None = None):
     """A mesh, texture or point cloud from ``path`` by its suffix; the built-in
-    tree when ``path`` is None; ``scene:NAME`` for another built-in scene."""
+    tree when ``path`` is None; ``scene:NAME`` for another built-in scene.
+    ``point_options`` go to :meth:`~aniso3d.build.points.PointCloud.load_ply`
+    and are refused for any other input."""
     from aniso3d.build import scenes
     from aniso3d.build.mesh import load_mesh
     from aniso3d.build.points import PointCloud
     from aniso3d.build.texture import AnisoTexture
+    from aniso3d.errors import InputError
 
+    if point_options and (path is None or not (Path(path).suffix.lower() == ".ply" and ply_is_point_cloud(path))):
+        flags = ", ".join("--" + k.replace("_", "-") for k in point_options)
+        verb = "is" if len(point_options) == 1 else "are"
+        raise InputError(f"{flags} {verb} for PLY point clouds only; '{path or 'the built-in tree'}' is not one")
     if path is None:
         return scenes.tree(**(scene_options or {}))
     if path.startswith("scene:"):
@@ -93,7 +123,7 @@ def load_input(path: str | None, scene_options: dict | None = None):
     if suffix == TEXTURE_SUFFIX:
         return AnisoTexture.load(path)
     if suffix == ".ply" and ply_is_point_cloud(path):
-        return PointCloud.load_ply(path)
+        return PointCloud.load_ply(path, **(point_options or {}))
     return load_mesh(path)
 
 

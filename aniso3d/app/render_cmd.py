@@ -23,7 +23,15 @@ from pathlib import Path
 
 import numpy as np
 
-from aniso3d.app.common import Progress, image_size, load_input, positive_float, positive_int
+from aniso3d.app.common import (
+    Progress,
+    add_point_cloud_options,
+    image_size,
+    load_input,
+    point_cloud_options,
+    positive_float,
+    positive_int,
+)
 from aniso3d.build.bounds import bounds_of, surface_sample
 from aniso3d.build.mesh import Mesh
 from aniso3d.build.points import PointCloud
@@ -86,6 +94,7 @@ def add_render_options(p: argparse.ArgumentParser) -> None:
                    help="with --lod: the largest a drawn voxel may be on screen, in "
                         "framebuffer pixels (--ssaa subdivides them)")
     p.add_argument("--backend", choices=("auto", "egl", "osmesa", "x11"), default="auto")
+    add_point_cloud_options(p)
 
 
 def _fov(text: str) -> float:
@@ -187,7 +196,7 @@ def cmd_render(args) -> int:
     if out.suffix.lower() != ".png":
         raise InputError(f"output '{out}' must end in .png")
     refuse_overwriting_input(out, args.input)
-    thing = load_input(args.input)
+    thing = load_input(args.input, point_options=point_cloud_options(args))
     bounds = bounds_of(thing)
     camera = camera_from_args(args, bounds, surface_sample(thing))
     with Renderer(args.size, backend=args.backend) as r:
@@ -416,7 +425,7 @@ def cmd_frames(args) -> int:
     folder = Path(args.output)
     if folder.exists() and not folder.is_dir():
         raise InputError(f"'{folder}' exists and is not a folder; 'frames' writes numbered PNGs into a folder")
-    thing = load_input(args.input)
+    thing = load_input(args.input, point_options=point_cloud_options(args))
     camera = camera_from_args(args, bounds_of(thing), surface_sample(thing))
     method = args.method or default_method(thing)
     cams = turntable(camera, args.frames, args.degrees)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from aniso3d.app.common import image_size, load_input, positive_int
+from aniso3d.app.common import add_point_cloud_options, image_size, load_input, point_cloud_options, positive_int
 
 
 def register(sub) -> None:
@@ -48,6 +48,7 @@ def register(sub) -> None:
     p.add_argument("--splat", choices=SPLATS, default="disc")
     p.add_argument("--quality", choices=QUALITIES, default="fast")
     p.add_argument("--screenshot-dir", default=".", help="folder for screenshots (key c or F12)")
+    add_point_cloud_options(p)
     p.set_defaults(func=cmd_view)
 
 
@@ -55,7 +56,7 @@ def cmd_view(args) -> int:
     from aniso3d.app.viewer import Settings, check_display, run_viewer
 
     check_display()  # no display: say so before spending time on loading
-    thing = load_input(args.input)
+    thing = load_input(args.input, point_options=point_cloud_options(args))
     settings = Settings(
         method=args.method,
         splat=args.splat,

@@ -79,3 +79,67 @@ def read_ply_header(path: str | os.PathLike) -> PlyHeader:
         f"'{p}' has no 'end_header' line in its first {MAX_HEADER_BYTES // 1024} KiB: "
         "its PLY header is damaged"
     )
+
+
+# ------------------------------------------------------------ point clouds
+
+#: Colour property triples other tools write, in the order they are looked for.
+COLOUR_NAMES = (
+    ("red", "green", "blue"),
+    ("r", "g", "b"),
+    ("diffuse_red", "diffuse_green", "diffuse_blue"),
+)
+#: Gaussian splatting's colour: the zeroth spherical-harmonic coefficient.
+SH_DC_NAMES = ("f_dc_0", "f_dc_1", "f_dc_2")
+NORMAL_NAMES = ("nx", "ny", "nz")
+#: Gaussian splatting's rotation quaternion (w, x, y, z, not normalised).
+ROTATION_NAMES = ("rot_0", "rot_1", "rot_2", "rot_3")
+
+
+@dataclass(frozen=True)
+class PointLayout:
+    """Which vertex properties of a PLY point cloud mean what (from the
+    header's names alone; :mod:`aniso3d.build.points` reads the values).
+
+    Attributes:
+        normals: ("nx", "ny", "nz"), or None.
+        colour: three property names (see :data:`COLOUR_NAMES`), or None.
+        sh_colour: :data:`SH_DC_NAMES` if the file is a Gaussian splat file
+            without plain colours, else None.
+        size: how the file gives each point's size: "area" (world units
+            squared), "radius" (world units), "log_scales" (Gaussian
+            splatting: natural logs of the standard deviations along the
+            Gaussian's axes, ``scale_0..2``, or ``scale_0..1`` for flat
+            Gaussians), or None.
+        scales: the ``scale_i`` names when ``size`` is "log_scales".
+        rotation: :data:`ROTATION_NAMES` if present, else None.
+    """
+
+    normals: tuple[str, ...] | None
+    colour: tuple[str, ...] | None
+    sh_colour: tuple[str, ...] | None
+    size: str | None
+    scales: tuple[str, ...]
+    rotation: tuple[str, ...] | None
+
+
+def point_layout(names: tuple[str, ...]) -> PointLayout:
+    """The :class:`PointLayout` of a vertex element with property ``names``."""
+    have = set(names)
+
+    def all_of(group):
+        return tuple(group) if all(c in have for c in group) else None
+
+    colour = next((g for g in COLOUR_NAMES if all_of(g)), None)
+    scales = tuple(n for n in ("scale_0", "scale_1", "scale_2") if n in have)
+    if len(scales) == 1 or (len(scales) == 2 and scales != ("scale_0", "scale_1")):
+        scales = ()
+    size = "area" if "area" in have else "radius" if "radius" in have else "log_scales" if scales else None
+    return PointLayout(
+        normals=all_of(NORMAL_NAMES),
+        colour=colour,
+        sh_colour=None if colour else all_of(SH_DC_NAMES),
+        size=size,
+        scales=scales if size == "log_scales" else (),
+        rotation=all_of(ROTATION_NAMES),
+    )

@@ -4,11 +4,13 @@ A :class:`PointCloud` is a plain data object: each point is a small oriented
 surface element with an area and a Phong material. aniso3d makes them from an
 :class:`~aniso3d.build.texture.AnisoTexture` (``texture.to_points()``), and reads and
 writes them as binary PLY that other tools (trimesh, MeshLab, CloudCompare)
-open.
+open, and reads the point clouds those tools, scanners and Gaussian-splatting
+programs write (:meth:`PointCloud.load_ply`, docs/point_clouds.md).
 """
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,7 +19,8 @@ import numpy as np
 import plyfile
 
 from aniso3d.build.mesh import DEFAULT_KD, DEFAULT_KS, DEFAULT_SHININESS, MAX_SHININESS, check_readable_file
-from aniso3d.build.ply import read_ply_header
+from aniso3d.build.ply import point_layout, read_ply_header
+from aniso3d.build.spacing import COVERAGE, DEFAULT_K, local_spacing, nearest_neighbours, pca_normals
 from aniso3d.errors import FormatError, InputError
 from aniso3d.files import atomic_write
 
@@ -30,8 +33,10 @@ class PointCloud:
         positions: (N, 3) float64, world units.
         normals: (N, 3) float32 unit normals (lighting is two-sided, so the sign
             only matters for point placement, not shading).
-        areas: (N,) float64 splat area in world units squared; the areas of the
-            points made from a texture sum to the mesh's area.
+        areas: (N,) float64 splat area in world units squared (a splat's
+            radius is ``sqrt(area / pi)``); the areas of the points made from
+            a texture sum to the mesh's area; a cloud read without sizes gets
+            overlapping splats from its spacing (:mod:`aniso3d.build.spacing`).
         kd: (N, 3) float32 diffuse reflectance in [0, 1].
         ks: (N,) float32 specular coefficient.
         shininess: (N,) float32 Phong exponent.
@@ -133,13 +138,40 @@ class PointCloud:
         return atomic_write(path, header.encode("ascii") + rec.tobytes())
 
     @classmethod
-    def load_ply(cls, path: str | os.PathLike, default_area: float | None = None) -> PointCloud:
-        """Read a PLY point cloud with normals (ours or another tool's).
+    def load_ply(
+        cls,
+        path: str | os.PathLike,
+        default_area: float | None = None,
+        *,
+        splat_size: float | None = None,
+        splat_scale: float = 1.0,
+        estimate_normals: bool = False,
+        k: int = DEFAULT_K,
+    ) -> PointCloud:
+        """Read a PLY point cloud (ours or another tool's; docs/point_clouds.md).
 
-        Colours default to :data:`~aniso3d.build.mesh.DEFAULT_KD`. Files without an
-        ``area`` property get one from ``default_area`` or, if that is None,
-        from the mean spacing of the points (a square of the nearest-neighbour
-        distance estimated from the bounding box and count).
+        Sizes, in order: ``splat_size`` if given (one radius for every point,
+        world units); else the file's ``area`` (world units squared), its
+        ``radius`` (area ``pi r^2``) or Gaussian splatting's log-scales
+        ``scale_0..2`` (area ``2 pi s_a s_b`` of the two largest standard
+        deviations, the integral of the Gaussian over its plane); else
+        ``default_area`` if given; else each point's radius from the spacing
+        of its ``k`` nearest neighbours (:func:`~aniso3d.build.spacing.splat_radii`),
+        so that a randomly sampled surface shows no holes. ``splat_scale``
+        then multiplies every radius.
+
+        Normals: ``nx ny nz``; where they are missing or zero, a Gaussian
+        splat's thinnest axis (from ``rot_0..3`` and its scales), else, with
+        ``estimate_normals``, the least-squares plane of the point and its
+        ``k`` nearest neighbours (:func:`~aniso3d.build.spacing.pca_normals`);
+        otherwise an :class:`~aniso3d.errors.InputError` says how to get them.
+
+        Colours: ``red green blue``, ``r g b`` or ``diffuse_red ...``,
+        integers scaled by their type's maximum (255 for uchar), floats taken
+        as 0..1 (as 0..255 if any exceeds 1); alpha is ignored (splats are
+        opaque); a Gaussian splat's ``f_dc_0..2`` as ``0.5 + C0 f_dc``; else
+        :data:`~aniso3d.build.mesh.DEFAULT_KD`. ``ks`` and ``shininess`` are
+        read when present.
         """
         p = check_readable_file(path, "point cloud")
         # The header says what the file holds before its body is read.
@@ -148,40 +180,126 @@ class PointCloud:
             raise FormatError(f"'{p}' has no PLY vertex element; is it a PLY point cloud?")
         if not all(c in names for c in ("x", "y", "z")):
             raise FormatError(f"'{p}' vertices have no x, y, z properties")
-        if not all(c in names for c in ("nx", "ny", "nz")):
-            raise InputError(
-                f"'{p}' has no normals (nx, ny, nz): splats need an orientation. "
-                "Estimate normals first (e.g. Open3D estimate_normals or MeshLab)"
-            )
+        layout = point_layout(names)
+        gaussian_axes = layout.rotation is not None and layout.size == "log_scales"
+        if layout.normals is None and not gaussian_axes and not estimate_normals:
+            raise InputError(_no_normals(p, "has no normals (nx, ny, nz)"))
+        for label, value in (("splat_size", splat_size), ("default_area", default_area)):
+            if value is not None and not (0 < value < math.inf):
+                raise InputError(f"{label} must be a positive, finite number, got {value}")
+        if not (0 < splat_scale < math.inf):
+            raise InputError(f"splat_scale must be a positive, finite number, got {splat_scale}")
+        if splat_size is not None and default_area is not None:
+            raise InputError("give splat_size (a radius) or default_area, not both")
         try:
-            vertex = plyfile.PlyData.read(str(p), mmap=False)["vertex"].data
+            # Mapped (copy-on-write), binary bodies are read as one array; without
+            # the map plyfile reads them value by value (25 s for 1M points).
+            vertex = plyfile.PlyData.read(str(p), mmap="c")["vertex"].data
         except Exception as exc:  # plyfile raises several types for damaged files
             raise FormatError(f"could not read PLY '{p}': {type(exc).__name__}: {exc}") from None
 
-        def col(name):
-            return np.asarray(vertex[name], dtype=np.float64).reshape(-1)
+        def col(name):  # a copy, so that nothing keeps the file mapped
+            return np.array(vertex[name], dtype=np.float64).reshape(-1)
 
         pos = np.stack([col("x"), col("y"), col("z")], axis=1)
-        nrm = np.stack([col("nx"), col("ny"), col("nz")], axis=1)
         n = len(pos)
         if n == 0:
             raise InputError(f"'{p}' holds no points")
-        if all(c in names for c in ("red", "green", "blue")):
-            rgb = np.stack([col("red"), col("green"), col("blue")], axis=1)
-            kd = rgb / (255.0 if np.issubdtype(vertex.dtype["red"], np.integer) else 1.0)
+        bad = ~np.isfinite(pos).all(axis=1)
+        if bad.any():
+            raise InputError(f"'{p}' has {int(bad.sum())} points with NaN or Inf coordinates; remove them first")
+
+        nrm = np.stack([col(c) for c in layout.normals], axis=1) if layout.normals else np.zeros((n, 3))
+        if gaussian_axes:
+            missing = ~(np.linalg.norm(nrm, axis=1) > 1e-12)
+            if missing.any():
+                log_scales = np.stack([col(c) for c in layout.scales], axis=1)[missing]
+                nrm[missing] = _gaussian_normals(np.stack([col(c) for c in layout.rotation], 1)[missing], log_scales)
+
+        size_from_file = splat_size is None and layout.size is not None
+        missing = ~(np.linalg.norm(nrm, axis=1) > 1e-12)
+        need_spacing = splat_size is None and layout.size is None and default_area is None
+        neighbours = None
+        if need_spacing or (missing.any() and estimate_normals):
+            if n < 2:
+                raise InputError(f"'{p}' holds one point: it has no spacing; give it a size (splat_size)")
+            neighbours = nearest_neighbours(pos, min(k, n - 1))
+        if missing.any():
+            if not estimate_normals:
+                raise InputError(_no_normals(p, f"has {int(missing.sum())} points with a zero normal"))
+            nrm[missing] = pca_normals(pos, neighbours[1])[missing]
+
+        if layout.colour:
+            kd = _colours(vertex, layout.colour)
+        elif layout.sh_colour:
+            kd = 0.5 + SH_C0 * np.stack([col(c) for c in layout.sh_colour], axis=1)
         else:
             kd = np.tile(DEFAULT_KD, (n, 1))
+        if not np.isfinite(kd).all():
+            bad = int((~np.isfinite(kd).all(axis=1)).sum())
+            raise InputError(f"'{p}' has {bad} points with NaN or Inf colours; fix or drop its colour properties")
         ks = col("ks") if "ks" in names else np.full(n, DEFAULT_KS)
         sh = col("shininess") if "shininess" in names else np.full(n, DEFAULT_SHININESS)
-        if "area" in names:
+
+        if splat_size is not None:
+            areas = np.full(n, math.pi * splat_size**2)
+        elif size_from_file and layout.size == "area":
             areas = col("area")
-        else:
-            if default_area is None:
-                finite = pos[np.isfinite(pos).all(axis=1)]
-                ext = np.ptp(finite, axis=0) if len(finite) else np.ones(3)
-                ext = np.sort(ext)[::-1]
-                # points on a surface: spacing ~ sqrt(surface extent / N)
-                surf = max(ext[0] * ext[1], ext[0] ** 2 * 1e-6, 1e-300)
-                default_area = 2.0 * surf / max(n, 1)
+        elif size_from_file and layout.size == "radius":
+            areas = math.pi * col("radius") ** 2
+        elif size_from_file:
+            sigma = np.sort(np.exp(np.stack([col(c) for c in layout.scales], axis=1)), axis=1)
+            areas = 2.0 * math.pi * sigma[:, -1] * sigma[:, -2]
+        elif default_area is not None:
             areas = np.full(n, float(default_area))
-        return cls(pos, nrm, areas, kd, ks, sh, name=p.stem)
+        else:
+            radius = COVERAGE * local_spacing(neighbours[0])
+            if not radius.max() > 0:
+                raise InputError(f"all {n} points of '{p}' coincide: they have no spacing; give a size (splat_size)")
+            # A point with k duplicates has no spacing of its own: the cloud's typical one.
+            radius[radius == 0] = np.median(radius[radius > 0])
+            areas = math.pi * radius**2
+        return cls(pos, nrm, areas * splat_scale**2, kd, ks, sh, name=p.stem)
+
+
+#: Zeroth-order spherical-harmonic constant, 1 / (2 sqrt(pi)): Gaussian
+#: splatting's colour is 0.5 + SH_C0 * f_dc.
+SH_C0 = 0.28209479177387814
+
+
+def _no_normals(path: Path, what: str) -> str:
+    return (
+        f"'{path}' {what}: splats need an orientation. Estimate them from the neighbours "
+        "(PointCloud.load_ply(..., estimate_normals=True), or --estimate-normals on the command line) "
+        "or in another tool (Open3D estimate_normals, MeshLab 'Compute normals for point sets')"
+    )
+
+
+def _colours(vertex: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
+    """(N, 3) float64 colours in [0, 1] from three colour properties:
+    integers over their type's maximum, floats as they are (over 255 if any
+    exceeds 1)."""
+    rgb = np.stack([np.array(vertex[c], dtype=np.float64).reshape(-1) for c in names], axis=1)
+    dtype = vertex.dtype[names[0]]
+    if np.issubdtype(dtype, np.integer):
+        return rgb / float(np.iinfo(dtype).max)
+    finite = rgb[np.isfinite(rgb)]
+    return rgb / 255.0 if finite.size and finite.max() > 1.0 else rgb
+
+
+def _gaussian_normals(quaternions: np.ndarray, log_scales: np.ndarray) -> np.ndarray:
+    """(M, 3) normals of Gaussian splats: the rotated axis of the smallest
+    scale (``scale_0..2``), or the third axis (flat ``scale_0..1``); zero
+    where the quaternion (w, x, y, z) is zero."""
+    q = quaternions / np.maximum(np.linalg.norm(quaternions, axis=1, keepdims=True), 1e-300)
+    w, x, y, z = q.T
+    rot = np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        axis=1,
+    )  # (M, 3, 3), rows of the rotation matrix
+    axis = np.argmin(log_scales, axis=1) if log_scales.shape[1] == 3 else np.full(len(q), 2)
+    return rot[np.arange(len(q)), :, axis]
