@@ -433,6 +433,14 @@ class _Frame:
     key: tuple | None = None  # the data being built, when building
 
 
+def _memory_bytes(thing) -> int:
+    """Bytes ``thing`` holds in memory: ``memory_nbytes`` where it has one (a
+    texture's ``nbytes`` is its stored, compressed size), else ``nbytes``."""
+    if hasattr(thing, "memory_nbytes"):
+        return int(thing.memory_nbytes)
+    return int(getattr(thing, "nbytes", 0))
+
+
 def _counts(data) -> str:
     if isinstance(data, Mesh):
         return f"{_fmt_int(data.n_faces)} triangles"
@@ -848,7 +856,7 @@ class Viewer:
             # Keep recent conversions for quick switching back, within a memory budget.
             while len(self._cache) > 2 and (
                 len(self._cache) > CACHE_ENTRIES
-                or sum(getattr(v, "nbytes", 0) for v in self._cache.values()) > CACHE_BYTES
+                or sum(_memory_bytes(v) for v in self._cache.values()) > CACHE_BYTES
             ):
                 self._cache.popitem(last=False)
             self._say(f"built {label} in {seconds:.2f} s: {_counts(results[self.builder.key])}")

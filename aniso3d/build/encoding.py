@@ -1,0 +1,469 @@
+"""The compact encoding of a texture: what an ``.a3d`` file of version 2 stores.
+
+In memory a texture keeps float64 and float32 arrays, about 400 bytes per
+occupied voxel of the default tree. To store it, each field is quantised no
+finer than the images need, and laid out so that deflate (the zip container's
+compression) finds what is left to squeeze. Loading decodes the same float
+arrays again. With the default :class:`Bits` (h the voxel edge; bounds are
+tested in tests/test_encoding.py):
+
+============================  =================================================  ==========================
+field                         stored as                                          error
+============================  =================================================  ==========================
+origin, shape, directions     as they are                                        exact
+coords                        sorted cell keys, delta-coded, in byte planes      exact
+entry_offsets, _direction     one bit per voxel and sample direction (M, K/8)    exact
+entry_area                    log2, 12 bits, over [max / 2**24, max]             relative 0.2 %
+entry_normal (direction)      octahedral, 12 bits a coordinate                   0.02 degrees
+entry_normal (length)         8 bits on [0, 1]                                   1/510
+entry_centroid                8 bits a coordinate, offset inside its voxel       h/512 per axis
+entry_kd, entry_ks            8 bits on [0, max(1, largest value)]               1/510 of that range
+entry_shininess               8 bits of log2(1 + n) on [0, log2(1 + largest n)]  relative (1 + n): 0.9 %
+density                       the residual ``D - F`` (see below), 8 bits of A_v  A_v / 510
+============================  =================================================  ==========================
+
+The density sphere is not stored as such: ``F_v(p) = sum_e A_e |n_e . N_p|``
+over the voxel's entries (their area and mean normal, as decoded) is the
+part of ``D_v(p) = sum_s S_s |N_s . N_p|`` that the entries already hold;
+it is exact for entries whose facets are flat and never larger than D (the
+triangle inequality), and is 99.2 % of D over the default tree. Only the
+residual ``D - F`` is stored, in units of the voxel's registered area
+``A_v / (2**bits - 1)`` (``D <= A_v``); most of it is 0 and deflates to
+nearly nothing. ``bits.density = 0`` drops it (``D = F``).
+
+Every field's quantiser is a pair of functions here (``_encode_*`` and
+``_decode_*``); :func:`encode` and :func:`decode` run them all. A code array
+of b bits is one uint8 (b <= 8) or uint16 array, stored as byte planes (all
+low bytes, then all high bytes) so that the mostly empty high bytes deflate
+away.
+
+Registration guarantees what the encoding assumes: coords sorted and inside
+the grid, each voxel's entries sorted by sample direction without repeats,
+areas, materials and density finite and not negative, centroids inside their
+voxel and ``F <= D <= A_v``. A texture breaking the first four is refused
+(:class:`~aniso3d.errors.InputError`); centroids and densities outside their
+ranges are clamped to them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from aniso3d.errors import FormatError, InputError
+from aniso3d.grid import cell_coords, cell_keys
+
+#: The arrays of a texture (the fields of :class:`aniso3d.build.texture.AnisoTexture`
+#: that hold arrays), what :func:`decode` returns and version 1 files store as they are.
+ARRAYS = ("origin", "shape", "coords", "directions", "density", "entry_offsets",
+          "entry_direction", "entry_area", "entry_kd", "entry_ks", "entry_shininess",
+          "entry_centroid", "entry_normal")  # fmt: skip
+
+#: The members of the compact encoding, in the order they are written.
+MEMBERS = ("origin", "shape", "directions", "coords", "entry_mask", "entry_area",
+           "entry_normal", "entry_coherence", "entry_centroid", "entry_kd", "entry_ks",
+           "entry_shininess", "density")  # fmt: skip
+
+#: Areas below ``max area / 2**AREA_SPAN`` are stored as that (an absolute
+#: error below 6e-8 of the largest entry's area): keeps the log range, and so
+#: the step, small whatever the smallest sliver is.
+AREA_SPAN = 24.0
+#: Entries' decoded F(p) are summed in batches of this many entries (E x K products).
+DENSITY_BATCH = 1 << 18
+
+
+@dataclass(frozen=True)
+class Bits:
+    """Bits per stored value of each quantised field (see the module table).
+
+    ``density`` 0 stores no residual: the density sphere is then derived
+    from the entries alone. Each count lies in 1..16 (2..16 for ``area``, whose
+    code 0 means a zero area, and ``normal``, a signed coordinate).
+    """
+
+    area: int = 12
+    normal: int = 12
+    coherence: int = 8
+    centroid: int = 8
+    kd: int = 8
+    ks: int = 8
+    shininess: int = 8
+    density: int = 8
+
+    def __post_init__(self) -> None:
+        for name, value in asdict(self).items():
+            low = 0 if name == "density" else 2 if name in ("area", "normal") else 1
+            if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= 16:
+                raise InputError(f"bits for '{name}' must be a whole number in {low}..16, got {value!r}")
+
+
+DEFAULT_BITS = Bits()
+
+
+# ------------------------------------------------------------------ byte planes
+
+
+def _width(bits: int) -> int:
+    """Bytes of one code of ``bits`` bits (1 or 2)."""
+    return 1 if bits <= 8 else 2
+
+
+def to_planes(codes: np.ndarray, width: int) -> np.ndarray:
+    """(R, N) unsigned codes -> (R * width, N) uint8 byte planes: for each row
+    its low bytes, then the next bytes, little-endian."""
+    c = np.ascontiguousarray(np.atleast_2d(codes), dtype=f"<u{width}")
+    rows, n = c.shape
+    return np.ascontiguousarray(c.view(np.uint8).reshape(rows, n, width).transpose(0, 2, 1)).reshape(
+        rows * width, n
+    )
+
+
+def from_planes(planes: np.ndarray, rows: int, width: int) -> np.ndarray:
+    """The inverse of :func:`to_planes`: (rows, N) unsigned codes of ``width`` bytes."""
+    n = planes.shape[1]
+    b = np.ascontiguousarray(planes.reshape(rows, width, n).transpose(0, 2, 1))
+    return b.view(f"<u{width}").reshape(rows, n)
+
+
+# ------------------------------------------------------------------- quantisers
+
+
+def _encode_keys(coords: np.ndarray, shape: np.ndarray) -> np.ndarray:
+    """Sorted cell keys as deltas (the first key itself), in the fewest of 1,
+    2, 4 or 8 bytes that hold them all: (width, M) byte planes."""
+    keys = cell_keys(coords, shape)
+    if len(keys) > 1 and np.any(np.diff(keys) <= 0):
+        raise InputError("texture coords are not sorted by cell or repeat a cell; they cannot be encoded")
+    delta = np.diff(keys, prepend=0).astype(np.uint64)
+    top = int(delta.max()) if len(delta) else 0
+    width = next(w for w in (1, 2, 4, 8) if top < 256**w)
+    return to_planes(delta, width)
+
+
+def _decode_keys(planes: np.ndarray, shape: np.ndarray) -> np.ndarray:
+    width = planes.shape[0]
+    if width not in (1, 2, 4, 8):
+        raise FormatError(f"coords has {width} byte planes, expected 1, 2, 4 or 8")
+    delta = from_planes(planes, 1, width)[0].astype(np.uint64)
+    if len(delta) > 1 and np.any(delta[1:] == 0):
+        raise FormatError("coords repeat a cell")
+    keys = np.cumsum(delta, dtype=np.uint64)
+    cells = int(np.prod(np.asarray(shape, dtype=np.int64)))
+    if len(keys) and int(keys[-1]) >= cells:
+        raise FormatError("coords lie outside the grid")
+    return cell_coords(keys.astype(np.int64), shape).astype(np.int32)
+
+
+def _encode_mask(offsets: np.ndarray, direction: np.ndarray, k: int) -> np.ndarray:
+    """(M, ceil(K / 8)) uint8: bit p of voxel v set when v has an entry at
+    sample p (entries sorted by direction within a voxel, as registration makes them)."""
+    m = len(offsets) - 1
+    voxel = np.repeat(np.arange(m), np.diff(offsets))
+    d = np.asarray(direction, dtype=np.int64)
+    if len(d) and (d.min() < 0 or d.max() >= k):
+        raise InputError(f"texture entry_direction lies outside 0..{k - 1}; it cannot be encoded")
+    key = voxel * k + d
+    if len(key) > 1 and np.any(np.diff(key) <= 0):
+        raise InputError(
+            "texture entries are not sorted by sample direction within each voxel, or repeat one; "
+            "they cannot be encoded"
+        )
+    occupied = np.zeros((m, k), dtype=bool)
+    occupied[voxel, d] = True
+    return np.packbits(occupied, axis=1)
+
+
+def _decode_mask(mask: np.ndarray, m: int, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """(offsets (M + 1,) int64, direction (E,) int32) from the occupancy mask."""
+    if mask.shape != (m, (k + 7) // 8):
+        raise FormatError(f"entry_mask has shape {mask.shape}, expected {(m, (k + 7) // 8)}")
+    occupied = np.unpackbits(mask, axis=1, count=k).astype(bool) if m else np.zeros((0, k), bool)
+    if k % 8 and np.any(np.unpackbits(mask, axis=1)[:, k:]):
+        raise FormatError("entry_mask sets bits past the last sample direction")
+    voxel, d = np.nonzero(occupied)
+    offsets = np.zeros(m + 1, dtype=np.int64)
+    offsets[1:] = np.cumsum(np.bincount(voxel, minlength=m))
+    return offsets, d.astype(np.int32)
+
+
+def _encode_log(a: np.ndarray, bits: int) -> tuple[np.ndarray, list[float]]:
+    """Positive values as ``1 + round((log2 a - lo) / (hi - lo) * (2**bits - 2))``
+    over ``[lo, hi] = [max(log2 min, hi - AREA_SPAN), log2 max]``, 0 as 0."""
+    a = np.asarray(a, dtype=np.float64)
+    pos = a > 0
+    if not pos.any():
+        return np.zeros(len(a), dtype=np.uint16), [0.0, 0.0]
+    hi = float(np.log2(a.max()))
+    lo = max(float(np.log2(a[pos].min())), hi - AREA_SPAN)
+    steps = 2**bits - 2
+    t = (np.log2(np.maximum(a, 2.0**lo)) - lo) / (hi - lo) if hi > lo else np.zeros(len(a))
+    codes = np.where(pos, 1 + np.round(np.clip(t, 0.0, 1.0) * steps), 0)
+    return codes.astype(np.uint16), [lo, hi]
+
+
+def _decode_log(codes: np.ndarray, bits: int, span: list[float]) -> np.ndarray:
+    lo, hi = span
+    steps = 2**bits - 2
+    value = np.exp2(lo + (codes.astype(np.float64) - 1.0) * ((hi - lo) / steps))
+    return np.where(codes > 0, value, 0.0)
+
+
+def _encode_oct(v: np.ndarray, bits: int) -> np.ndarray:
+    """(2, E) codes of unit vectors ``v`` (E, 3) on the octahedron, each
+    coordinate rounded symmetrically to ``2**(bits-1) - 1`` steps a side (so
+    0 and +-1, the axes, are exact)."""
+    v = np.asarray(v, dtype=np.float64)
+    s = np.abs(v).sum(axis=1)
+    p = v[:, :2] / np.where(s > 0, s, 1.0)[:, None]
+    sign = np.where(p >= 0, 1.0, -1.0)
+    p = np.where((v[:, 2] < 0)[:, None], (1.0 - np.abs(p[:, ::-1])) * sign, p)
+    m = 2 ** (bits - 1) - 1
+    return (np.round(np.clip(p, -1.0, 1.0) * m) + m).astype(np.uint16).T
+
+
+def _decode_oct(codes: np.ndarray, bits: int) -> np.ndarray:
+    m = 2 ** (bits - 1) - 1
+    p = (codes.T.astype(np.float64) - m) / m
+    z = 1.0 - np.abs(p).sum(axis=1)
+    sign = np.where(p >= 0, 1.0, -1.0)
+    p = np.where((z < 0)[:, None], (1.0 - np.abs(p[:, ::-1])) * sign, p)
+    v = np.column_stack([p, z])
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def _encode_unit(x: np.ndarray, bits: int, scale: float) -> np.ndarray:
+    """``round(x / scale * (2**bits - 1))`` for x in [0, scale] (clamped)."""
+    top = 2**bits - 1
+    return np.round(np.clip(np.asarray(x, dtype=np.float64) / scale, 0.0, 1.0) * top).astype(np.uint16)
+
+
+def _decode_unit(codes: np.ndarray, bits: int, scale: float) -> np.ndarray:
+    return codes.astype(np.float64) * (scale / (2**bits - 1))
+
+
+def _encode_centroid(centroid, origin, voxel_size, coords, voxel, bits) -> np.ndarray:
+    """(3, E) codes of each centroid's offset in its voxel: ``floor(f * 2**bits)``
+    of f in [0, 1) per axis, decoded at the middle of its step."""
+    f = (np.asarray(centroid, dtype=np.float64) - origin) / voxel_size - coords[voxel]
+    n = 2**bits
+    return np.clip(np.floor(f * n), 0, n - 1).astype(np.uint16).T
+
+
+def _decode_centroid(codes, origin, voxel_size, coords, voxel, bits) -> np.ndarray:
+    f = (codes.T.astype(np.float64) + 0.5) / 2**bits
+    return origin + (coords[voxel] + f) * voxel_size
+
+
+def facet_density(area: np.ndarray, normal: np.ndarray, offsets: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """(M, K) float64 ``F_v(p) = sum_e A_e |n_e . N_p|`` over each voxel's
+    entries: the density sphere as far as the entries' areas (E,) and mean
+    normals (E, 3) know it (exact for flat entries, never above the true
+    density). Summed in batches of :data:`DENSITY_BATCH` entries."""
+    m, k = len(offsets) - 1, len(directions)
+    out = np.zeros((m, k))
+    voxel = np.repeat(np.arange(m), np.diff(offsets))
+    dirs = np.asarray(directions, dtype=np.float64)
+    for start in range(0, len(area), DENSITY_BATCH):
+        stop = min(len(area), start + DENSITY_BATCH)
+        part = np.abs(np.asarray(normal[start:stop], dtype=np.float64) @ dirs.T) * np.asarray(
+            area[start:stop], dtype=np.float64
+        )[:, None]
+        _add_rows(out, voxel[start:stop], part)
+    return out
+
+
+def _add_rows(out: np.ndarray, rows: np.ndarray, values: np.ndarray) -> None:
+    """``out[rows] += values`` for sorted ``rows`` with repeats (reduceat, not add.at)."""
+    starts = np.flatnonzero(np.diff(rows, prepend=-1))
+    out[rows[starts]] += np.add.reduceat(values, starts, axis=0)
+
+
+# ------------------------------------------------------------------- the whole
+
+
+def _check_shapes(arrays: dict[str, np.ndarray]) -> None:
+    """Refuse arrays that do not make one texture (what the compact encoding relies on)."""
+    m, k = len(arrays["coords"]), len(arrays["directions"])
+    e = len(arrays["entry_direction"])
+    want = {"origin": (3,), "shape": (3,), "coords": (m, 3), "directions": (k, 3), "density": (m, k),
+            "entry_offsets": (m + 1,), "entry_area": (e,), "entry_kd": (e, 3), "entry_ks": (e,),
+            "entry_shininess": (e,), "entry_centroid": (e, 3), "entry_normal": (e, 3)}  # fmt: skip
+    for name, shape in want.items():
+        got = np.shape(arrays[name])
+        if got != shape:
+            raise InputError(f"texture field '{name}' has shape {got}, expected {shape}; it cannot be encoded")
+    off = np.asarray(arrays["entry_offsets"])
+    if off[0] != 0 or off[-1] != e or np.any(np.diff(off) < 0):
+        raise InputError("texture entry_offsets are not a valid CSR offset array; it cannot be encoded")
+
+
+def _check_finite_nonnegative(arrays: dict[str, np.ndarray]) -> None:
+    for name in ("density", "entry_area", "entry_kd", "entry_ks", "entry_shininess",
+                 "entry_centroid", "entry_normal", "directions", "origin"):  # fmt: skip
+        a = np.asarray(arrays[name])
+        if not np.isfinite(a).all():
+            raise InputError(f"texture field '{name}' holds NaN or infinite values; it cannot be encoded")
+        if name in ("density", "entry_area", "entry_kd", "entry_ks", "entry_shininess") and np.any(a < 0):
+            raise InputError(f"texture field '{name}' holds negative values; it cannot be encoded")
+
+
+def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAULT_BITS) -> tuple[dict, dict]:
+    """The compact encoding of a texture's ``arrays`` (every name of :data:`ARRAYS`).
+
+    Returns ``(members, params)``: ``members`` maps each name of :data:`MEMBERS`
+    (``density`` only when ``bits.density > 0``) to an array to store, and
+    ``params`` the JSON numbers :func:`decode` needs (the bits and each
+    quantiser's range). Deterministic: equal inputs give equal outputs.
+    """
+    _check_shapes(arrays)
+    _check_finite_nonnegative(arrays)
+    origin = np.asarray(arrays["origin"], dtype=np.float64)
+    shape = np.asarray(arrays["shape"], dtype=np.int64)
+    coords = np.asarray(arrays["coords"], dtype=np.int64)
+    dirs = np.asarray(arrays["directions"], dtype=np.float64)
+    offsets = np.asarray(arrays["entry_offsets"], dtype=np.int64)
+    k = len(dirs)
+    if len(coords) and (np.any(coords < 0) or np.any(coords >= shape)):
+        raise InputError("texture coords lie outside its grid shape; it cannot be encoded")
+    voxel = np.repeat(np.arange(len(coords)), np.diff(offsets))
+
+    area_codes, area_span = _encode_log(arrays["entry_area"], bits.area)
+    normal = np.asarray(arrays["entry_normal"], dtype=np.float64)
+    length = np.linalg.norm(normal, axis=1)
+    # A zero mean normal (facets that cancel) has no direction: any will do.
+    unit = np.where((length > 0)[:, None], normal / np.where(length > 0, length, 1.0)[:, None], [0.0, 0.0, 1.0])
+    kd_scale = max(1.0, float(np.max(arrays["entry_kd"], initial=0.0)))
+    ks_scale = max(1.0, float(np.max(arrays["entry_ks"], initial=0.0)))
+    sh_log = float(np.log2(1.0 + np.max(arrays["entry_shininess"], initial=0.0)))
+    params = {
+        "bits": asdict(bits),
+        "area_log2_range": area_span,
+        "kd_scale": kd_scale,
+        "ks_scale": ks_scale,
+        "shininess_log2_max": sh_log,
+    }
+    normal_codes = _encode_oct(unit, bits.normal)
+    coherence_codes = _encode_unit(length, bits.coherence, 1.0)
+    members = {
+        "origin": origin,
+        "shape": shape,
+        "directions": dirs,
+        "coords": _encode_keys(coords, shape),
+        "entry_mask": _encode_mask(offsets, arrays["entry_direction"], k),
+        "entry_area": to_planes(area_codes, _width(bits.area)),
+        "entry_normal": to_planes(normal_codes, _width(bits.normal)),
+        "entry_coherence": to_planes(coherence_codes, _width(bits.coherence)),
+        "entry_centroid": to_planes(
+            _encode_centroid(arrays["entry_centroid"], origin, float(voxel_size), coords, voxel, bits.centroid),
+            _width(bits.centroid),
+        ),
+        "entry_kd": to_planes(_encode_unit(np.asarray(arrays["entry_kd"]).T, bits.kd, kd_scale), _width(bits.kd)),
+        "entry_ks": to_planes(_encode_unit(arrays["entry_ks"], bits.ks, ks_scale), _width(bits.ks)),
+        "entry_shininess": to_planes(
+            _encode_unit(np.log2(1.0 + np.asarray(arrays["entry_shininess"], dtype=np.float64)), bits.shininess,
+                         sh_log or 1.0),
+            _width(bits.shininess),
+        ),  # fmt: skip
+    }
+    if bits.density:
+        # The residual against F of the *decoded* entries: what decode adds back.
+        area = _decode_log(area_codes, bits.area, area_span)
+        nrm = _decode_oct(normal_codes, bits.normal) * _decode_unit(coherence_codes, bits.coherence, 1.0)[:, None]
+        f = facet_density(area, nrm, offsets, dirs)
+        a_v = np.bincount(voxel, weights=area, minlength=len(coords))
+        residual = np.asarray(arrays["density"], dtype=np.float64) - f
+        scale = np.where(a_v > 0, a_v, 1.0)[:, None]
+        codes = _encode_unit(residual / scale, bits.density, 1.0)
+        members["density"] = to_planes(codes.reshape(1, -1), _width(bits.density))
+    return members, params
+
+
+def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float) -> dict[str, np.ndarray]:
+    """The texture arrays (every name of :data:`ARRAYS`, dtypes as
+    :func:`~aniso3d.build.texture.build_texture` makes them) of a compact
+    encoding. Raises :class:`~aniso3d.errors.FormatError` naming what does
+    not fit when members or params are inconsistent."""
+    try:
+        bits = Bits(**params["bits"])
+        area_span = [float(x) for x in params["area_log2_range"]]
+        kd_scale, ks_scale = float(params["kd_scale"]), float(params["ks_scale"])
+        sh_log = float(params["shininess_log2_max"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise FormatError(f"the encoding parameters are damaged ({exc})") from None
+    if len(area_span) != 2 or not all(math.isfinite(x) for x in (*area_span, kd_scale, ks_scale, sh_log)):
+        raise FormatError("the encoding parameters are damaged (not finite numbers)")
+    origin = _shaped(members, "origin", np.float64, (3,))
+    shape = _shaped(members, "shape", np.int64, (3,))
+    if np.any(shape < 1):
+        raise FormatError(f"shape {shape.tolist()} is not a grid")
+    dirs = members["directions"]
+    if dirs.ndim != 2 or dirs.shape[1] != 3 or dirs.dtype != np.float64:
+        raise FormatError(f"directions has shape {dirs.shape} and dtype {dirs.dtype}, expected (K, 3) float64")
+    k = len(dirs)
+    coords = _decode_keys(_uint8(members, "coords", None), shape)
+    m = len(coords)
+    offsets, direction = _decode_mask(_uint8(members, "entry_mask", None), m, k)
+    e = len(direction)
+    voxel = np.repeat(np.arange(m), np.diff(offsets))
+
+    def codes(name: str, rows: int, b: int) -> np.ndarray:
+        planes = _uint8(members, name, (rows * _width(b), e))
+        c = from_planes(planes, rows, _width(b))
+        if c.size and int(c.max()) >= 2**b:
+            raise FormatError(f"{name} holds codes above {b} bits")
+        return c
+
+    area = _decode_log(codes("entry_area", 1, bits.area)[0], bits.area, area_span)
+    unit = _decode_oct(codes("entry_normal", 2, bits.normal), bits.normal)
+    length = _decode_unit(codes("entry_coherence", 1, bits.coherence)[0], bits.coherence, 1.0)
+    normal = unit * length[:, None]
+    centroid = _decode_centroid(
+        codes("entry_centroid", 3, bits.centroid), origin, float(voxel_size), coords.astype(np.int64), voxel,
+        bits.centroid,
+    )  # fmt: skip
+    kd = _decode_unit(codes("entry_kd", 3, bits.kd), bits.kd, kd_scale).T
+    ks = _decode_unit(codes("entry_ks", 1, bits.ks)[0], bits.ks, ks_scale)
+    sh = np.exp2(_decode_unit(codes("entry_shininess", 1, bits.shininess)[0], bits.shininess, sh_log or 1.0)) - 1.0
+    density = facet_density(area, normal, offsets, dirs)
+    if bits.density:
+        w = _width(bits.density)
+        res = from_planes(_uint8(members, "density", (w, m * k)), 1, w)[0].reshape(m, k)
+        if res.size and int(res.max()) >= 2**bits.density:
+            raise FormatError(f"density holds codes above {bits.density} bits")
+        a_v = np.bincount(voxel, weights=area, minlength=m)
+        density += _decode_unit(res, bits.density, 1.0) * np.where(a_v > 0, a_v, 1.0)[:, None]
+    elif "density" in members:
+        raise FormatError("density is stored although the encoding says it is derived")
+    return {
+        "origin": origin,
+        "shape": shape,
+        "coords": coords,
+        "directions": dirs,
+        "density": density,
+        "entry_offsets": offsets,
+        "entry_direction": direction,
+        "entry_area": area,
+        "entry_kd": kd.astype(np.float32),
+        "entry_ks": ks.astype(np.float32),
+        "entry_shininess": np.maximum(sh, 0.0).astype(np.float32),
+        "entry_centroid": centroid,
+        "entry_normal": normal.astype(np.float32),
+    }
+
+
+def _shaped(members: dict, name: str, dtype, shape: tuple) -> np.ndarray:
+    a = members[name]
+    if a.dtype != dtype or a.shape != shape:
+        raise FormatError(f"{name} has shape {a.shape} and dtype {a.dtype}, expected {shape} {np.dtype(dtype)}")
+    return a
+
+
+def _uint8(members: dict, name: str, shape: tuple | None) -> np.ndarray:
+    a = members[name]
+    if a.dtype != np.uint8 or a.ndim != (2 if shape is None else len(shape)):
+        raise FormatError(f"{name} has shape {a.shape} and dtype {a.dtype}, expected uint8 byte planes")
+    if shape is not None and a.shape != shape:
+        raise FormatError(f"{name} has shape {a.shape}, expected {shape}")
+    return a
