@@ -53,7 +53,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from aniso3d.errors import FormatError, InputError
-from aniso3d.grid import cell_coords, cell_keys
+from aniso3d.grid import cell_coords, cell_keys, tangent_frame
 
 #: The arrays of a texture (the fields of :class:`aniso3d.build.texture.AnisoTexture`
 #: that hold arrays), what :func:`decode` returns and version 1 files store as they are.
@@ -70,6 +70,9 @@ MEMBERS = ("origin", "shape", "directions", "coords", "entry_mask", "entry_area"
 #: error below 6e-8 of the largest entry's area): keeps the log range, and so
 #: the step, small whatever the smallest sliver is.
 AREA_SPAN = 24.0
+#: Mean normals are stored about their sample direction (:func:`_encode_frame`)
+#: when none lies farther than this from it, in degrees; else octahedral.
+FRAME_MAX_ANGLE = 60.0
 #: Entries' decoded F(p) are summed in batches of this many entries (E x K products).
 DENSITY_BATCH = 1 << 18
 
@@ -84,7 +87,7 @@ class Bits:
     """
 
     area: int = 12
-    normal: int = 12
+    normal: int = 10
     coherence: int = 8
     centroid: int = 8
     kd: int = 8
@@ -233,6 +236,52 @@ def _decode_oct(codes: np.ndarray, bits: int) -> np.ndarray:
     return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
+def _encode_frame(v: np.ndarray, sample: np.ndarray, bits: int, span: float) -> np.ndarray:
+    """(2, E) codes of unit vectors ``v`` (E, 3) as the point where they meet
+    the plane tangent to their sample direction ``sample`` (E, 3) at distance 1
+    (gnomonic coordinates along :func:`~aniso3d.grid.tangent_frame`), each
+    rounded to ``2**(bits-1) - 1`` steps on ``[-span, span]``. Needs
+    ``v . sample > 0``; registration puts every mean normal inside its sample
+    direction's Voronoi cell, so the coordinates stay small."""
+    t, b = tangent_frame(sample)
+    c = np.sum(v * sample, axis=1)
+    g = np.stack([np.sum(v * t, axis=1), np.sum(v * b, axis=1)]) / c
+    m = 2 ** (bits - 1) - 1
+    scaled = g / span if span > 0 else np.zeros_like(g)
+    return (np.round(np.clip(scaled, -1.0, 1.0) * m) + m).astype(np.uint16)
+
+
+def _decode_frame(codes: np.ndarray, sample: np.ndarray, bits: int, span: float) -> np.ndarray:
+    m = 2 ** (bits - 1) - 1
+    g = (codes.astype(np.float64) - m) / m * span
+    t, b = tangent_frame(sample)
+    v = sample + g[0][:, None] * t + g[1][:, None] * b
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def _frame_span(v: np.ndarray, sample: np.ndarray) -> float | None:
+    """The largest gnomonic coordinate of unit vectors ``v`` about their sample
+    directions, or None when one lies more than ``FRAME_MAX_ANGLE`` from its
+    sample direction (then the octahedral map serves better)."""
+    if not len(v):
+        return 0.0
+    c = np.sum(v * sample, axis=1)
+    if c.min() < np.cos(np.radians(FRAME_MAX_ANGLE)):
+        return None
+    t, b = tangent_frame(sample)
+    return float(np.max(np.abs(np.stack([np.sum(v * t, axis=1), np.sum(v * b, axis=1)]) / c)))
+
+
+def _decode_normal(codes: np.ndarray, length: np.ndarray, bits: Bits, span: float | None,
+                   sample: np.ndarray) -> np.ndarray:  # fmt: skip
+    """(E, 3) float32 mean normals from their direction codes (2, E), in the
+    sample frame (``span``) or octahedral (``span`` None), and length codes
+    (1, E) or (E,). float32 as built; F is computed from these very values
+    by encoder and decoder, so that decoded D >= F exactly."""
+    unit = _decode_oct(codes, bits.normal) if span is None else _decode_frame(codes, sample, bits.normal, span)
+    return (unit * _decode_unit(np.ravel(length), bits.coherence, 1.0)[:, None]).astype(np.float32)
+
+
 def _encode_unit(x: np.ndarray, bits: int, scale: float) -> np.ndarray:
     """``round(x / scale * (2**bits - 1))`` for x in [0, scale] (clamped)."""
     top = 2**bits - 1
@@ -240,7 +289,7 @@ def _encode_unit(x: np.ndarray, bits: int, scale: float) -> np.ndarray:
 
 
 def _decode_unit(codes: np.ndarray, bits: int, scale: float) -> np.ndarray:
-    return codes.astype(np.float64) * (scale / (2**bits - 1))
+    return codes.astype(np.float64) / (2**bits - 1) * scale
 
 
 def _encode_centroid(centroid, origin, voxel_size, coords, voxel, bits) -> np.ndarray:
@@ -333,7 +382,8 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
     normal = np.asarray(arrays["entry_normal"], dtype=np.float64)
     length = np.linalg.norm(normal, axis=1)
     # A zero mean normal (facets that cancel) has no direction: any will do.
-    unit = np.where((length > 0)[:, None], normal / np.where(length > 0, length, 1.0)[:, None], [0.0, 0.0, 1.0])
+    sample = dirs[np.asarray(arrays["entry_direction"], dtype=np.int64)]
+    unit = np.where((length > 0)[:, None], normal / np.where(length > 0, length, 1.0)[:, None], sample)
     kd_scale = max(1.0, float(np.max(arrays["entry_kd"], initial=0.0)))
     ks_scale = max(1.0, float(np.max(arrays["entry_ks"], initial=0.0)))
     sh_log = float(np.log2(1.0 + np.max(arrays["entry_shininess"], initial=0.0)))
@@ -344,7 +394,9 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
         "ks_scale": ks_scale,
         "shininess_log2_max": sh_log,
     }
-    normal_codes = _encode_oct(unit, bits.normal)
+    span = _frame_span(unit, sample)
+    params["normal_frame_span"] = span
+    normal_codes = _encode_oct(unit, bits.normal) if span is None else _encode_frame(unit, sample, bits.normal, span)
     coherence_codes = _encode_unit(length, bits.coherence, 1.0)
     members = {
         "origin": origin,
@@ -370,7 +422,7 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
     if bits.density:
         # The residual against F of the *decoded* entries: what decode adds back.
         area = _decode_log(area_codes, bits.area, area_span)
-        nrm = _decode_oct(normal_codes, bits.normal) * _decode_unit(coherence_codes, bits.coherence, 1.0)[:, None]
+        nrm = _decode_normal(normal_codes, coherence_codes, bits, span, sample)
         f = facet_density(area, nrm, offsets, dirs)
         a_v = np.bincount(voxel, weights=area, minlength=len(coords))
         residual = np.asarray(arrays["density"], dtype=np.float64) - f
@@ -390,9 +442,12 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float) -> d
         area_span = [float(x) for x in params["area_log2_range"]]
         kd_scale, ks_scale = float(params["kd_scale"]), float(params["ks_scale"])
         sh_log = float(params["shininess_log2_max"])
+        span = params["normal_frame_span"]
+        span = None if span is None else float(span)
     except (KeyError, TypeError, ValueError) as exc:
         raise FormatError(f"the encoding parameters are damaged ({exc})") from None
-    if len(area_span) != 2 or not all(math.isfinite(x) for x in (*area_span, kd_scale, ks_scale, sh_log)):
+    numbers = (*area_span, kd_scale, ks_scale, sh_log, 0.0 if span is None else span)
+    if len(area_span) != 2 or not all(math.isfinite(x) for x in numbers):
         raise FormatError("the encoding parameters are damaged (not finite numbers)")
     origin = _shaped(members, "origin", np.float64, (3,))
     shape = _shaped(members, "shape", np.int64, (3,))
@@ -416,9 +471,8 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float) -> d
         return c
 
     area = _decode_log(codes("entry_area", 1, bits.area)[0], bits.area, area_span)
-    unit = _decode_oct(codes("entry_normal", 2, bits.normal), bits.normal)
-    length = _decode_unit(codes("entry_coherence", 1, bits.coherence)[0], bits.coherence, 1.0)
-    normal = unit * length[:, None]
+    normal = _decode_normal(codes("entry_normal", 2, bits.normal), codes("entry_coherence", 1, bits.coherence),
+                            bits, span, dirs[direction])  # fmt: skip
     centroid = _decode_centroid(
         codes("entry_centroid", 3, bits.centroid), origin, float(voxel_size), coords.astype(np.int64), voxel,
         bits.centroid,
@@ -434,8 +488,6 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float) -> d
             raise FormatError(f"density holds codes above {bits.density} bits")
         a_v = np.bincount(voxel, weights=area, minlength=m)
         density += _decode_unit(res, bits.density, 1.0) * np.where(a_v > 0, a_v, 1.0)[:, None]
-    elif "density" in members:
-        raise FormatError("density is stored although the encoding says it is derived")
     return {
         "origin": origin,
         "shape": shape,
@@ -449,7 +501,7 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float) -> d
         "entry_ks": ks.astype(np.float32),
         "entry_shininess": np.maximum(sh, 0.0).astype(np.float32),
         "entry_centroid": centroid,
-        "entry_normal": normal.astype(np.float32),
+        "entry_normal": normal,
     }
 
 
