@@ -12,7 +12,7 @@ stores it and every other field as built, minus the same from the texture
 as built. ``all`` quantises everything (what loading the file gives);
 ``density derived`` drops the stored residual (``Bits(density=0)``: the
 density sphere from the entries alone); the ``... N bits`` rows try other
-bit counts for one field. PSNR inside the object's box in the truth image
+bit counts for one field (``--bits`` measures other defaults). PSNR inside the object's box in the truth image
 (its pixels with alpha > 0, plus 8 px), 8-bit values.
 
 Scenes are names of ``aniso3d.build.scenes.SCENES`` (``tree8`` is
@@ -34,13 +34,13 @@ import platform
 import tempfile
 import time
 import zipfile
-from dataclasses import replace
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
 
 from aniso3d.build import scenes
-from aniso3d.build.encoding import DEFAULT_BITS, Bits
+from aniso3d.build.encoding import DEFAULT_BITS, facet_density
 from aniso3d.build.mesh import Mesh
 from aniso3d.build.texture import AnisoTexture, build_texture
 from aniso3d.metrics import psnr
@@ -68,11 +68,11 @@ STRUCTURE = ("origin", "shape", "directions", "coords", "entry_mask")
 
 #: (row name, field, bits): other bit counts tried for one field.
 ALTERNATIVES = (
-    ("density derived", "density", Bits(density=0)),
-    ("area 8 bits", "area", Bits(area=8)),
-    ("normal 10 bits", "normal", Bits(normal=10)),
-    ("centroid 6 bits", "centroid", Bits(centroid=6)),
-    ("kd 6 bits", "kd", Bits(kd=6)),
+    ("density derived", "density", {"density": 0}),
+    ("area 8 bits", "area", {"area": 8}),
+    ("normal 8 bits", "normal", {"normal": 8}),
+    ("centroid 6 bits", "centroid", {"centroid": 6}),
+    ("kd 6 bits", "kd", {"kd": 6}),
 )
 
 RENDERS = (("volume", {}), ("splat", {"quality": "high"}))
@@ -91,7 +91,7 @@ def ply_bytes(mesh: Mesh) -> int:
     return 12 * len(mesh.vertices) + 13 * mesh.n_faces
 
 
-def member_bytes(tex: AnisoTexture, bits: Bits, folder: Path) -> tuple[int, dict[str, int]]:
+def member_bytes(tex: AnisoTexture, bits, folder: Path) -> tuple[int, dict[str, int]]:
     """File size of the compact encoding and each member's deflated bytes
     (its zip local header included); the header member and the zip's
     directory are counted under ``header``."""
@@ -139,18 +139,22 @@ def run_scene(name: str, mesh: Mesh, args, gl: GLContext, folder: Path) -> dict:
     t0 = time.perf_counter()
     tex = build_texture(mesh, args.resolution, args.directions)
     build_s = time.perf_counter() - t0
-    size, members = member_bytes(tex, DEFAULT_BITS, folder)
-    stored = tex.as_stored()
+    size, members = member_bytes(tex, args.bits, folder)
+    stored = tex.as_stored(args.bits)
+    dens = np.asarray(tex.density)
+    derived = facet_density(tex.entry_area, tex.entry_normal, tex.entry_offsets, tex.directions)
     cams = [Camera.fit(mesh.bounds, direction=direction(), aspect=1.0, distance_scale=s) for s in args.scales]
     res = {
         "name": name, "triangles": mesh.n_faces, "vertices": len(mesh.vertices), "voxels": tex.n_voxels,
         "entries": tex.n_entries, "ply": ply_bytes(mesh), "memory": tex.memory_nbytes, "file": size,
-        "nbytes": tex.nbytes, "members": members, "build_s": build_s, "rows": [],
+        "members": members, "build_s": build_s, "rows": [],
+        "derived_l1": float(np.abs(dens - derived).sum() / max(dens.sum(), 1e-300)),
     }  # fmt: skip
     variants = [("all", None, stored)]
     variants += [(field, field, hybrid(tex, stored, arrays)) for field, (arrays, _) in FIELDS.items()]
-    for row, field, bits in ALTERNATIVES if args.alternatives else ():
-        alt_size, alt_members = member_bytes(tex, bits, folder)
+    for row, field, change in ALTERNATIVES if args.alternatives else ():
+        bits = replace(args.bits, **change)
+        _, alt_members = member_bytes(tex, bits, folder)
         variants.append((row, field, hybrid(tex, tex.as_stored(bits), FIELDS[field][0])))
         res.setdefault("alt_bytes", {})[row] = sum(alt_members.get(m, 0) for m in FIELDS[field][1])
     size2 = (args.size, args.size)
@@ -197,8 +201,11 @@ def main() -> None:
                     help="camera distance scales (Camera.fit distance_scale); PSNR is their mean")
     ap.add_argument("--no-alternatives", dest="alternatives", action="store_false",
                     help="skip the rows that try other bit counts")
+    ap.add_argument("--bits", nargs="*", default=[], metavar="FIELD=N",
+                    help="bits to measure instead of the defaults (aniso3d.build.encoding.Bits), e.g. centroid=7")
     ap.add_argument("--md", default="", help="Markdown file to write the tables into")
     args = ap.parse_args()
+    args.bits = replace(DEFAULT_BITS, **{k: int(v) for k, v in (b.split("=") for b in args.bits)})
 
     started = time.time()
     load0 = os.getloadavg()
@@ -223,7 +230,7 @@ def main() -> None:
             mib(res["ply"]), mib(res["memory"]), mib(res["file"]),
             f"{res['memory'] / res['ply']:.2f}", f"{res['file'] / res['ply']:.3f}",
             f"{res['memory'] / res['file']:.1f}", f"{res['file'] / res['voxels']:.1f}",
-            f"{res['base'][0]:.2f}", f"{res['base'][1]:.2f}",
+            f"{res['base'][0]:.2f}", f"{res['base'][1]:.2f}", f"{100 * res['derived_l1']:.2f}",
         ])  # fmt: skip
         members = res["members"]
         structure = sum(members.get(m, 0) for m in STRUCTURE) + members["header"]
@@ -238,6 +245,8 @@ def main() -> None:
             field_rows.append([res["name"], row, mib(n), f"{n / res['entries']:.2f}",
                                f"{deltas[0]:+.3f}", f"{deltas[1]:+.3f}"])  # fmt: skip
 
+    changed = {k: v for k, v in asdict(args.bits).items() if v != getattr(DEFAULT_BITS, k)}
+    bits_arg = ("--bits " + " ".join(f"{k}={v}" for k, v in changed.items()) + " ") if changed else ""
     worst = {m: min((d[i] for res in results for row, _, d in res["rows"] if row == "all"), default=math.nan)
              for i, m in enumerate(("volume", "splat"))}  # fmt: skip
     parts = [
@@ -245,7 +254,7 @@ def main() -> None:
         f"Run {time.strftime('%Y-%m-%d %H:%M')} in {minutes:.1f} min on {gl_name}, {platform.machine()}, "
         f"{os.cpu_count()} CPUs, load average (1, 5, 15 min) {load0[0]:.1f} {load0[1]:.1f} {load0[2]:.1f} "
         f"at the start and {load1[0]:.1f} {load1[1]:.1f} {load1[2]:.1f} at the end; "
-        f"`demos/bench_encoding.py {' '.join(args.scenes)} --size {args.size} --resolution {args.resolution} "
+        f"`demos/bench_encoding.py {' '.join(args.scenes)} {bits_arg}--size {args.size} --resolution {args.resolution} "
         f"--directions {args.directions} --scales {' '.join(f'{s:g}' for s in args.scales)}`. "
         f"Images {args.size}x{args.size}, `Camera.fit(bounds, direction=(azimuth {AZIMUTH:g}, elevation "
         f"{ELEVATION:g}), aspect=1, distance_scale=s)`; PSNR against the polygons at {args.gt_ssaa}x"
@@ -254,10 +263,13 @@ def main() -> None:
         "",
         "**Sizes.** PLY: the mesh as a binary PLY (12 B a vertex, 13 a triangle). Memory: the "
         "texture's arrays as built (`memory_nbytes`; a version 1 file stored these). File: the "
-        "compact version 2 file `save()` writes (`nbytes`). PSNR: of the texture as built.",
+        f"compact version 2 file `save()` writes with `{args.bits}` (`nbytes` with the defaults). "
+        "PSNR: of the texture as built. F vs D: the density sphere derived from the entries, "
+        "`F_v(p) = sum_e A_e |n_e . N_p|`, against the registered one, `sum |D - F| / sum D`.",
         "",
         md_table(["scene", "triangles", "voxels", "entries", "PLY", "memory", "file", "memory / PLY",
-                  "file / PLY", "memory / file", "file B / voxel", "volume PSNR dB", "splat PSNR dB"],
+                  "file / PLY", "memory / file", "file B / voxel", "volume PSNR dB", "splat PSNR dB",
+                  "F vs D %"],
                  size_rows),  # fmt: skip
         "",
         "**Per field.** Bytes of the field's members in the compact file (deflated) and per shading "

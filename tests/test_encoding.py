@@ -9,6 +9,7 @@ import io
 import json
 import re
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -164,13 +165,23 @@ def test_sample_frame_normals_are_within_the_closed_form_bound(bits):
     assert enc._frame_span(tilted, np.array([[0.0, 0.0, 1.0]])) is None
 
 
-def test_unit_and_centroid_quantisers_are_within_half_a_step():
+def test_range_unit_and_centroid_quantisers_are_within_half_a_step():
     rng = np.random.default_rng(5)
     x = rng.uniform(0, 2.5, 10000)
     back = enc._decode_unit(enc._encode_unit(x, 8, 2.5), 8, 2.5)
     assert np.max(np.abs(back - x)) <= 2.5 / 510 + 1e-12
     exact = np.arange(256) / 255
     assert np.array_equal(enc._decode_unit(enc._encode_unit(exact, 8, 1.0), 8, 1.0), exact)
+    # per-row ranges: half a step of each row's own range; ends and constant rows exact
+    rows = np.stack([rng.uniform(0.1, 0.35, 5000), rng.uniform(0.35, 0.7, 5000), np.full(5000, 0.8)])
+    for log, bits in ((False, 8), (False, 6), (True, 8)):
+        codes, ranges = enc._encode_range(rows, bits, log=log)
+        got = enc._decode_range(codes, bits, ranges, log=log)
+        f = (lambda v: np.log2(1 + v)) if log else (lambda v: v)
+        half = (f(rows.max(axis=1)) - f(rows.min(axis=1))) / (2 * (2**bits - 1))
+        assert np.all(np.abs(f(got) - f(rows)) <= half[:, None] + 1e-12)
+        assert np.array_equal(got.min(axis=1), rows.min(axis=1)) and np.array_equal(got.max(axis=1), rows.max(axis=1))
+        assert np.all(got[2] == 0.8)
     h, origin = 0.37, np.array([-3.0, 2.0, 11.0])
     coords = rng.integers(0, 50, (1000, 3))
     cent = origin + (coords + rng.uniform(0, 1, (1000, 3))) * h
@@ -225,27 +236,28 @@ def assert_within_bounds(tex: AnisoTexture, got: AnisoTexture, bits: Bits = DEFA
     floor = a.max() * 2.0**-enc.AREA_SPAN
     rel = np.abs(a2 / np.maximum(a, 1e-300) - 1)
     assert np.all((rel <= 2 ** (step / 2) - 1 + 1e-12) | ((a < floor) & (a2 <= floor * 2 ** (step / 2) * 1.000001)))
-    # normals: direction (in the sample frame when every normal lies within
-    # 60 degrees of its sample direction, else octahedral) and length
-    m = 2 ** (bits.normal - 1) - 1
+    # normals: direction (octahedral, or about the sample direction with a
+    # span below tan 60 degrees < 3, whichever deflates smaller) and length
+    m, m_oct = 2 ** (bits.normal - 1) - 1, 2 ** (enc.oct_bits(bits) - 1) - 1
     n, n2 = tex.entry_normal.astype(np.float64), got.entry_normal.astype(np.float64)
     length = np.linalg.norm(n, axis=1)
-    sample = tex.directions[tex.entry_direction]
-    span = enc._frame_span(n / length[:, None], sample)
-    bound = 3 / (np.sqrt(2) * m) if span is None else span / (np.sqrt(2) * m)
-    assert angle_between(n, n2).max() <= bound + 1e-6
-    half = 1 / (2 * (2**bits.coherence - 1))
-    assert np.max(np.abs(np.linalg.norm(n2, axis=1) - np.minimum(length, 1))) <= half + 1e-6
+    bound = max(3 / (np.sqrt(2) * m_oct), np.tan(np.radians(enc.FRAME_MAX_ANGLE)) / (np.sqrt(2) * m))
+    assert angle_between(n, n2).max(initial=0) <= bound + 1e-6
+    ell = np.minimum(length, 1)
+    half = (ell.max() - ell.min()) / (2 * (2**bits.coherence - 1)) if len(ell) else 0
+    assert np.max(np.abs(np.linalg.norm(n2, axis=1) - ell), initial=0) <= half + 1e-6
     # centroids: h / 2**(bits + 1) per axis
     assert np.max(np.abs(got.entry_centroid - tex.entry_centroid)) <= h / 2 ** (bits.centroid + 1) * (1 + 1e-9)
-    # materials
-    kd_scale = max(1.0, float(tex.entry_kd.max()))
-    assert np.max(np.abs(got.entry_kd - tex.entry_kd)) <= kd_scale / (2 * (2**bits.kd - 1)) + 1e-6
-    ks_scale = max(1.0, float(tex.entry_ks.max()))
-    assert np.max(np.abs(got.entry_ks - tex.entry_ks)) <= ks_scale / (2 * (2**bits.ks - 1)) + 1e-6
-    big = np.log2(1 + float(tex.entry_shininess.max()))
-    ratio = (1 + got.entry_shininess.astype(np.float64)) / (1 + tex.entry_shininess.astype(np.float64))
-    assert np.max(np.abs(np.log2(ratio))) <= big / (2 * (2**bits.shininess - 1)) + 1e-6
+    # materials and normal lengths: half a step of their own range, ends exact
+    for name, log in (("entry_kd", False), ("entry_ks", False), ("entry_shininess", True)):
+        x = getattr(tex, name).astype(np.float64).reshape(len(a), -1)
+        y = getattr(got, name).astype(np.float64).reshape(len(a), -1)
+        f = (lambda v: np.log2(1 + v)) if log else (lambda v: v)
+        b = getattr(bits, name.removeprefix("entry_"))
+        if len(x):
+            half = (f(x.max(axis=0)) - f(x.min(axis=0))) / (2 * (2**b - 1))
+            assert np.all(np.abs(f(y) - f(x)) <= half + 1e-6), name
+            assert np.array_equal(y.min(axis=0), x.min(axis=0)) and np.array_equal(y.max(axis=0), x.max(axis=0))
     # density: the residual's half step (of the voxel's area) plus what the
     # entries' own errors move F by (from the actual differences: a bound
     # per voxel and sample, not a fit)
@@ -316,14 +328,18 @@ def test_pyramid_levels_and_dense_voxels_encode(tree_tex):
     assert_within_bounds(dense, dense.as_stored())
 
 
-def test_materials_above_one_are_scaled_not_clipped(tree_tex):
+def test_materials_above_one_are_kept_and_single_materials_exact(tree_tex):
     from dataclasses import replace
 
     tex = replace(tree_tex, entry_kd=tree_tex.entry_kd * 3, entry_ks=tree_tex.entry_ks * 2.5,
                   entry_shininess=tree_tex.entry_shininess * 50)  # fmt: skip
     got = tex.as_stored()
-    assert got.entry_kd.max() == pytest.approx(tex.entry_kd.max(), abs=3 / 510)
+    assert got.entry_kd.max() == tex.entry_kd.max() > 1
     assert_within_bounds(tex, got)
+    cube = build_texture(scenes.cube(kd=(0.8, 0.3, 0.55), ks=0.25, shininess=33.0), 12, 16)
+    c = cube.as_stored()
+    for name in ("entry_kd", "entry_ks", "entry_shininess"):
+        assert np.array_equal(getattr(c, name), getattr(cube, name)), name
 
 
 def test_empty_texture_round_trips(tmp_path):
@@ -451,7 +467,8 @@ DAMAGED = [
     ("params not an object", dict(header=lambda h: h.update(params=[1])), "params is not an object"),
     ("bits missing", dict(header=lambda h: h["params"].pop("bits")), "encoding parameters are damaged"),
     ("bits out of range", dict(header=lambda h: h["params"]["bits"].update(area=40)), "bits for 'area'"),
-    ("scale not finite", dict(header=lambda h: h["params"].update(kd_scale=float("inf"))), "not finite"),
+    ("range not finite", dict(header=lambda h: h["params"]["ranges"].update(ks=[[0, float("inf")]])), "range of ks"),
+    ("ranges short", dict(header=lambda h: h["params"]["ranges"].update(kd=[[0, 1]])), "range of kd"),
     ("coords repeat", dict(members=_set("coords", lambda a: np.concatenate([a, a[:, -1:] * 0], axis=1))),
      "entry_mask has shape|coords repeat"),
     ("coords past the grid", dict(members=_set("coords", lambda a: a + np.uint8(200))), "outside the grid"),
@@ -460,7 +477,7 @@ DAMAGED = [
     ("area length", dict(members=_set("entry_area", lambda a: a[:, :-1])), "entry_area has shape"),
     ("area dtype", dict(members=_set("entry_area", lambda a: a.astype(np.int16))), "entry_area has shape .* dtype"),
     ("codes above bits", dict(members=_set("entry_normal", lambda a: a | np.uint8(0xF0))),
-     "entry_normal holds codes above 10"),
+     "entry_normal holds codes above 1[02] bits"),
     ("density shape", dict(members=_set("density", lambda a: a[:, :-1])), "density has shape"),
     ("directions dtype", dict(members=_set("directions", lambda a: a.astype(np.float32))), "directions has shape"),
 ]  # fmt: skip
@@ -474,3 +491,21 @@ def test_damaged_compact_files_are_refused_with_one_clear_error(tree_file, tmp_p
     msg = str(info.value)
     assert str(bad) in msg and "\n" not in msg
     assert "rebuild" in msg or "Upgrade" in msg
+
+
+def test_normals_take_the_smaller_of_the_two_maps(tree_tex):
+    """Scattered facets deflate smaller about their sample directions, a smooth
+    sphere on the octahedral map: each file keeps whichever is smaller."""
+    chosen = []
+    for tex in (tree_tex, build_texture(scenes.sphere(), 48, 16)):
+        members, params = enc.encode({n: getattr(tex, n) for n in ARRAYS}, tex.voxel_size)
+        n = tex.entry_normal.astype(np.float64)
+        unit = n / np.linalg.norm(n, axis=1, keepdims=True)
+        sample = tex.directions[tex.entry_direction]
+        span = enc._frame_span(unit, sample)
+        sizes = [enc._deflated(enc._encode_oct(unit, enc.oct_bits(DEFAULT_BITS)), enc.oct_bits(DEFAULT_BITS)),
+                 enc._deflated(enc._encode_frame(unit, sample, DEFAULT_BITS.normal, span), DEFAULT_BITS.normal)]
+        stored = len(zlib.compress(members["entry_normal"].tobytes()))
+        assert stored == min(sizes)
+        chosen.append(params["normal_frame_span"] is not None)
+    assert chosen == [True, False]

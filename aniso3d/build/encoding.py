@@ -48,6 +48,7 @@ ranges are clamped to them.
 from __future__ import annotations
 
 import math
+import zlib
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -272,14 +273,55 @@ def _frame_span(v: np.ndarray, sample: np.ndarray) -> float | None:
     return float(np.max(np.abs(np.stack([np.sum(v * t, axis=1), np.sum(v * b, axis=1)]) / c)))
 
 
-def _decode_normal(codes: np.ndarray, length: np.ndarray, bits: Bits, span: float | None,
+def oct_bits(bits: Bits) -> int:
+    """Bits a coordinate of the octahedral map gets: two more than about a
+    sample direction (whose plane spans 2 tan 40 degrees or so, against the
+    map's 2 for the whole sphere), so the two are about as precise (at most 16)."""
+    return min(16, bits.normal + 2)
+
+
+def _deflated(codes: np.ndarray, bits: int) -> int:
+    """Bytes of ``codes`` as stored byte planes once deflated (zlib's default level)."""
+    return len(zlib.compress(to_planes(codes, _width(bits)).tobytes()))
+
+
+def _decode_normal(codes: np.ndarray, length: np.ndarray, length_range: list, bits: Bits, span: float | None,
                    sample: np.ndarray) -> np.ndarray:  # fmt: skip
     """(E, 3) float32 mean normals from their direction codes (2, E), in the
     sample frame (``span``) or octahedral (``span`` None), and length codes
-    (1, E) or (E,). float32 as built; F is computed from these very values
-    by encoder and decoder, so that decoded D >= F exactly."""
-    unit = _decode_oct(codes, bits.normal) if span is None else _decode_frame(codes, sample, bits.normal, span)
-    return (unit * _decode_unit(np.ravel(length), bits.coherence, 1.0)[:, None]).astype(np.float32)
+    (1, E) on ``length_range``. float32 as built; F is computed from these
+    very values by encoder and decoder, so that decoded D >= F exactly."""
+    unit = _decode_oct(codes, oct_bits(bits)) if span is None else _decode_frame(codes, sample, bits.normal, span)
+    scale = _decode_range(np.atleast_2d(length), bits.coherence, length_range)[0]
+    return (unit * scale[:, None]).astype(np.float32)
+
+
+def _encode_range(x: np.ndarray, bits: int, log: bool = False) -> tuple[np.ndarray, list[list[float]]]:
+    """(R, N) codes of the rows of ``x`` (R, N) on each row's own range
+    ``[lo, hi]``: ``round((x - lo) / (hi - lo) * (2**bits - 1))``, of
+    ``log2(1 + x)`` when ``log``. A row's smallest and largest values decode
+    exactly (so a constant row, one material, is exact); the rest within half
+    a step, ``(hi - lo) / (2 (2**bits - 1))`` (in ``log2(1 + x)`` when ``log``)."""
+    x = np.atleast_2d(np.asarray(x, dtype=np.float64))
+    lo = x.min(axis=1) if x.shape[1] else np.zeros(len(x))
+    hi = x.max(axis=1) if x.shape[1] else np.zeros(len(x))
+    f = (lambda v: np.log2(1.0 + v)) if log else (lambda v: v)
+    a, b = f(lo)[:, None], f(hi)[:, None]
+    t = np.divide(f(x) - a, b - a, out=np.zeros_like(x), where=b > a)
+    codes = np.round(np.clip(t, 0.0, 1.0) * (2**bits - 1)).astype(np.uint16)
+    return codes, [[float(u), float(v)] for u, v in zip(lo, hi, strict=True)]
+
+
+def _decode_range(codes: np.ndarray, bits: int, ranges: list[list[float]], log: bool = False) -> np.ndarray:
+    top = 2**bits - 1
+    lo, hi = (np.array([r[i] for r in ranges], dtype=np.float64)[:, None] for i in (0, 1))
+    t = codes.astype(np.float64) / top
+    if log:
+        a, b = np.log2(1.0 + lo), np.log2(1.0 + hi)
+        mid = np.exp2(a + t * (b - a)) - 1.0
+    else:
+        mid = lo + t * (hi - lo)
+    return np.where(codes == 0, lo, np.where(codes == top, hi, mid))
 
 
 def _encode_unit(x: np.ndarray, bits: int, scale: float) -> np.ndarray:
@@ -384,20 +426,27 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
     # A zero mean normal (facets that cancel) has no direction: any will do.
     sample = dirs[np.asarray(arrays["entry_direction"], dtype=np.int64)]
     unit = np.where((length > 0)[:, None], normal / np.where(length > 0, length, 1.0)[:, None], sample)
-    kd_scale = max(1.0, float(np.max(arrays["entry_kd"], initial=0.0)))
-    ks_scale = max(1.0, float(np.max(arrays["entry_ks"], initial=0.0)))
-    sh_log = float(np.log2(1.0 + np.max(arrays["entry_shininess"], initial=0.0)))
+    coherence_codes, coherence_range = _encode_range(np.minimum(length, 1.0), bits.coherence)
+    kd_codes, kd_range = _encode_range(np.asarray(arrays["entry_kd"]).T, bits.kd)
+    ks_codes, ks_range = _encode_range(arrays["entry_ks"], bits.ks)
+    sh_codes, sh_range = _encode_range(arrays["entry_shininess"], bits.shininess, log=True)
+    span = _frame_span(unit, sample)
+    normal_codes = _encode_oct(unit, oct_bits(bits))
+    if span is not None:
+        # Smooth surfaces: spatially adjacent normals are adjacent on the
+        # octahedral map, and deflate finds that; scattered facets (foliage)
+        # take fewer bytes about their sample directions. Keep the smaller.
+        framed = _encode_frame(unit, sample, bits.normal, span)
+        if _deflated(framed, bits.normal) < _deflated(normal_codes, oct_bits(bits)):
+            normal_codes = framed
+        else:
+            span = None
     params = {
         "bits": asdict(bits),
         "area_log2_range": area_span,
-        "kd_scale": kd_scale,
-        "ks_scale": ks_scale,
-        "shininess_log2_max": sh_log,
+        "normal_frame_span": span,
+        "ranges": {"coherence": coherence_range, "kd": kd_range, "ks": ks_range, "shininess": sh_range},
     }
-    span = _frame_span(unit, sample)
-    params["normal_frame_span"] = span
-    normal_codes = _encode_oct(unit, bits.normal) if span is None else _encode_frame(unit, sample, bits.normal, span)
-    coherence_codes = _encode_unit(length, bits.coherence, 1.0)
     members = {
         "origin": origin,
         "shape": shape,
@@ -411,18 +460,14 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
             _encode_centroid(arrays["entry_centroid"], origin, float(voxel_size), coords, voxel, bits.centroid),
             _width(bits.centroid),
         ),
-        "entry_kd": to_planes(_encode_unit(np.asarray(arrays["entry_kd"]).T, bits.kd, kd_scale), _width(bits.kd)),
-        "entry_ks": to_planes(_encode_unit(arrays["entry_ks"], bits.ks, ks_scale), _width(bits.ks)),
-        "entry_shininess": to_planes(
-            _encode_unit(np.log2(1.0 + np.asarray(arrays["entry_shininess"], dtype=np.float64)), bits.shininess,
-                         sh_log or 1.0),
-            _width(bits.shininess),
-        ),  # fmt: skip
+        "entry_kd": to_planes(kd_codes, _width(bits.kd)),
+        "entry_ks": to_planes(ks_codes, _width(bits.ks)),
+        "entry_shininess": to_planes(sh_codes, _width(bits.shininess)),
     }
     if bits.density:
         # The residual against F of the *decoded* entries: what decode adds back.
         area = _decode_log(area_codes, bits.area, area_span)
-        nrm = _decode_normal(normal_codes, coherence_codes, bits, span, sample)
+        nrm = _decode_normal(normal_codes, coherence_codes, coherence_range, bits, span, sample)
         f = facet_density(area, nrm, offsets, dirs)
         a_v = np.bincount(voxel, weights=area, minlength=len(coords))
         residual = np.asarray(arrays["density"], dtype=np.float64) - f
@@ -440,14 +485,17 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float) -> d
     try:
         bits = Bits(**params["bits"])
         area_span = [float(x) for x in params["area_log2_range"]]
-        kd_scale, ks_scale = float(params["kd_scale"]), float(params["ks_scale"])
-        sh_log = float(params["shininess_log2_max"])
         span = params["normal_frame_span"]
         span = None if span is None else float(span)
+        ranges = {}
+        for name, rows in (("coherence", 1), ("kd", 3), ("ks", 1), ("shininess", 1)):
+            r = [[float(lo), float(hi)] for lo, hi in params["ranges"][name]]
+            if len(r) != rows or not all(math.isfinite(x) for x in np.ravel(r)):
+                raise ValueError(f"range of {name} is {r}")
+            ranges[name] = r
     except (KeyError, TypeError, ValueError) as exc:
         raise FormatError(f"the encoding parameters are damaged ({exc})") from None
-    numbers = (*area_span, kd_scale, ks_scale, sh_log, 0.0 if span is None else span)
-    if len(area_span) != 2 or not all(math.isfinite(x) for x in numbers):
+    if len(area_span) != 2 or not all(math.isfinite(x) for x in (*area_span, 0.0 if span is None else span)):
         raise FormatError("the encoding parameters are damaged (not finite numbers)")
     origin = _shaped(members, "origin", np.float64, (3,))
     shape = _shaped(members, "shape", np.int64, (3,))
@@ -471,15 +519,16 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float) -> d
         return c
 
     area = _decode_log(codes("entry_area", 1, bits.area)[0], bits.area, area_span)
-    normal = _decode_normal(codes("entry_normal", 2, bits.normal), codes("entry_coherence", 1, bits.coherence),
-                            bits, span, dirs[direction])  # fmt: skip
+    nb = bits.normal if span is not None else oct_bits(bits)
+    normal = _decode_normal(codes("entry_normal", 2, nb), codes("entry_coherence", 1, bits.coherence),
+                            ranges["coherence"], bits, span, dirs[direction])  # fmt: skip
     centroid = _decode_centroid(
         codes("entry_centroid", 3, bits.centroid), origin, float(voxel_size), coords.astype(np.int64), voxel,
         bits.centroid,
     )  # fmt: skip
-    kd = _decode_unit(codes("entry_kd", 3, bits.kd), bits.kd, kd_scale).T
-    ks = _decode_unit(codes("entry_ks", 1, bits.ks)[0], bits.ks, ks_scale)
-    sh = np.exp2(_decode_unit(codes("entry_shininess", 1, bits.shininess)[0], bits.shininess, sh_log or 1.0)) - 1.0
+    kd = _decode_range(codes("entry_kd", 3, bits.kd), bits.kd, ranges["kd"]).T
+    ks = _decode_range(codes("entry_ks", 1, bits.ks), bits.ks, ranges["ks"])[0]
+    sh = _decode_range(codes("entry_shininess", 1, bits.shininess), bits.shininess, ranges["shininess"], log=True)[0]
     density = facet_density(area, normal, offsets, dirs)
     if bits.density:
         w = _width(bits.density)
