@@ -172,16 +172,19 @@ def test_range_unit_and_centroid_quantisers_are_within_half_a_step():
     assert np.max(np.abs(back - x)) <= 2.5 / 510 + 1e-12
     exact = np.arange(256) / 255
     assert np.array_equal(enc._decode_unit(enc._encode_unit(exact, 8, 1.0), 8, 1.0), exact)
-    # per-row ranges: half a step of each row's own range; ends and constant rows exact
+    # per-row ranges: steps of at most S / (2**bits - 1), S = max(1, largest)
+    # (log2(1 + largest) in log); the ends and constant rows exact
     rows = np.stack([rng.uniform(0.1, 0.35, 5000), rng.uniform(0.35, 0.7, 5000), np.full(5000, 0.8)])
-    for log, bits in ((False, 8), (False, 6), (True, 8)):
-        codes, ranges = enc._encode_range(rows, bits, log=log)
+    for log, bits, scale in ((False, 8, 1.0), (False, 6, 1.0), (True, 8, 1.0), (False, 8, 40.0), (True, 5, 1e4)):
+        x = rows * scale
+        codes, ranges = enc._encode_range(x, bits, log=log)
         got = enc._decode_range(codes, bits, ranges, log=log)
         f = (lambda v: np.log2(1 + v)) if log else (lambda v: v)
-        half = (f(rows.max(axis=1)) - f(rows.min(axis=1))) / (2 * (2**bits - 1))
-        assert np.all(np.abs(f(got) - f(rows)) <= half[:, None] + 1e-12)
-        assert np.array_equal(got.min(axis=1), rows.min(axis=1)) and np.array_equal(got.max(axis=1), rows.max(axis=1))
-        assert np.all(got[2] == 0.8)
+        S = f(x.max()) if log else max(1.0, x.max())
+        assert np.max(np.abs(f(got) - f(x))) <= S / (2 * (2**bits - 1)) * (1 + 1e-9)
+        assert np.array_equal(got.min(axis=1), x.min(axis=1)) and np.array_equal(got.max(axis=1), x.max(axis=1))
+        assert np.all(got[2] == x[2, 0])
+        assert max(r[2] for r in ranges) <= 2**bits - 1 and ranges[2][2] == 0
     h, origin = 0.37, np.array([-3.0, 2.0, 11.0])
     coords = rng.integers(0, 50, (1000, 3))
     cent = origin + (coords + rng.uniform(0, 1, (1000, 3))) * h
@@ -244,20 +247,21 @@ def assert_within_bounds(tex: AnisoTexture, got: AnisoTexture, bits: Bits = DEFA
     bound = max(3 / (np.sqrt(2) * m_oct), np.tan(np.radians(enc.FRAME_MAX_ANGLE)) / (np.sqrt(2) * m))
     assert angle_between(n, n2).max(initial=0) <= bound + 1e-6
     ell = np.minimum(length, 1)
-    half = (ell.max() - ell.min()) / (2 * (2**bits.coherence - 1)) if len(ell) else 0
+    half = 1 / (2 * (2**bits.coherence - 1))
     assert np.max(np.abs(np.linalg.norm(n2, axis=1) - ell), initial=0) <= half + 1e-6
     # centroids: h / 2**(bits + 1) per axis
     assert np.max(np.abs(got.entry_centroid - tex.entry_centroid)) <= h / 2 ** (bits.centroid + 1) * (1 + 1e-9)
-    # materials and normal lengths: half a step of their own range, ends exact
+    # materials: steps of at most S / (2**bits - 1), ends exact
     for name, log in (("entry_kd", False), ("entry_ks", False), ("entry_shininess", True)):
         x = getattr(tex, name).astype(np.float64).reshape(len(a), -1)
         y = getattr(got, name).astype(np.float64).reshape(len(a), -1)
+        if not len(x):
+            continue
         f = (lambda v: np.log2(1 + v)) if log else (lambda v: v)
-        b = getattr(bits, name.removeprefix("entry_"))
-        if len(x):
-            half = (f(x.max(axis=0)) - f(x.min(axis=0))) / (2 * (2**b - 1))
-            assert np.all(np.abs(f(y) - f(x)) <= half + 1e-6), name
-            assert np.array_equal(y.min(axis=0), x.min(axis=0)) and np.array_equal(y.max(axis=0), x.max(axis=0))
+        S = f(x.max()) if log else max(1.0, x.max())
+        half = S / (2 * (2 ** getattr(bits, name.removeprefix("entry_")) - 1))
+        assert np.all(np.abs(f(y) - f(x)) <= half * (1 + 1e-6) + 1e-6), name
+        assert np.array_equal(y.min(axis=0), x.min(axis=0)) and np.array_equal(y.max(axis=0), x.max(axis=0))
     # density: the residual's half step (of the voxel's area) plus what the
     # entries' own errors move F by (from the actual differences: a bound
     # per voxel and sample, not a fit)
@@ -467,8 +471,12 @@ DAMAGED = [
     ("params not an object", dict(header=lambda h: h.update(params=[1])), "params is not an object"),
     ("bits missing", dict(header=lambda h: h["params"].pop("bits")), "encoding parameters are damaged"),
     ("bits out of range", dict(header=lambda h: h["params"]["bits"].update(area=40)), "bits for 'area'"),
-    ("range not finite", dict(header=lambda h: h["params"]["ranges"].update(ks=[[0, float("inf")]])), "range of ks"),
-    ("ranges short", dict(header=lambda h: h["params"]["ranges"].update(kd=[[0, 1]])), "range of kd"),
+    ("range not finite", dict(header=lambda h: h["params"]["ranges"].update(ks=[[0, float("inf"), 3]])),
+     "range of ks"),
+    ("ranges short", dict(header=lambda h: h["params"]["ranges"].update(kd=[[0, 1, 3]])), "range of kd"),
+    ("range steps", dict(header=lambda h: h["params"]["ranges"].update(ks=[[0, 1, 300]])), "range of ks"),
+    ("codes past range", dict(header=lambda h: h["params"]["ranges"]["kd"][0].__setitem__(2, 1)),
+     "codes past its range"),
     ("coords repeat", dict(members=_set("coords", lambda a: np.concatenate([a, a[:, -1:] * 0], axis=1))),
      "entry_mask has shape|coords repeat"),
     ("coords past the grid", dict(members=_set("coords", lambda a: a + np.uint8(200))), "outside the grid"),

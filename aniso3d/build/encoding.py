@@ -297,31 +297,40 @@ def _decode_normal(codes: np.ndarray, length: np.ndarray, length_range: list, bi
 
 
 def _encode_range(x: np.ndarray, bits: int, log: bool = False) -> tuple[np.ndarray, list[list[float]]]:
-    """(R, N) codes of the rows of ``x`` (R, N) on each row's own range
-    ``[lo, hi]``: ``round((x - lo) / (hi - lo) * (2**bits - 1))``, of
-    ``log2(1 + x)`` when ``log``. A row's smallest and largest values decode
-    exactly (so a constant row, one material, is exact); the rest within half
-    a step, ``(hi - lo) / (2 (2**bits - 1))`` (in ``log2(1 + x)`` when ``log``)."""
+    """(R, N) codes of the rows of ``x`` (R, N), non-negative, each on its own
+    range ``[lo, hi]`` cut into ``n`` equal steps no longer than
+    ``S / (2**bits - 1)``, with ``S = max(1, largest value)`` (or, when ``log``,
+    steps of ``log2(1 + x)`` with ``S = log2(1 + largest)``): the precision of
+    ``bits`` bits over ``[0, S]``, spent only where the values are. Returns
+    the codes and ``[lo, hi, n]`` per row. Both ends decode exactly (one
+    material is exact, two are at the ends); the rest within half a step."""
     x = np.atleast_2d(np.asarray(x, dtype=np.float64))
-    lo = x.min(axis=1) if x.shape[1] else np.zeros(len(x))
-    hi = x.max(axis=1) if x.shape[1] else np.zeros(len(x))
     f = (lambda v: np.log2(1.0 + v)) if log else (lambda v: v)
-    a, b = f(lo)[:, None], f(hi)[:, None]
-    t = np.divide(f(x) - a, b - a, out=np.zeros_like(x), where=b > a)
-    codes = np.round(np.clip(t, 0.0, 1.0) * (2**bits - 1)).astype(np.uint16)
-    return codes, [[float(u), float(v)] for u, v in zip(lo, hi, strict=True)]
+    top = 2**bits - 1
+    codes = np.zeros(x.shape, dtype=np.uint16)
+    ranges = []
+    for row in range(len(x)):  # a row per colour channel: at most 3
+        lo, hi = (float(x[row].min()), float(x[row].max())) if x.shape[1] else (0.0, 0.0)
+        a, b = f(lo), f(hi)
+        full = f(hi) if log else max(1.0, hi)
+        n = min(top, math.ceil((b - a) / full * top - 1e-9)) if b > a else 0
+        if n:
+            codes[row] = np.round(np.clip((f(x[row]) - a) / (b - a), 0.0, 1.0) * n)
+        ranges.append([lo, hi, n])
+    return codes, ranges
 
 
 def _decode_range(codes: np.ndarray, bits: int, ranges: list[list[float]], log: bool = False) -> np.ndarray:
-    top = 2**bits - 1
-    lo, hi = (np.array([r[i] for r in ranges], dtype=np.float64)[:, None] for i in (0, 1))
-    t = codes.astype(np.float64) / top
+    lo, hi, n = (np.array([r[i] for r in ranges], dtype=np.float64)[:, None] for i in (0, 1, 2))
+    if codes.size and np.any(codes > n):
+        raise FormatError("a quantised field holds codes past its range")
+    t = codes.astype(np.float64) / np.maximum(n, 1)
     if log:
         a, b = np.log2(1.0 + lo), np.log2(1.0 + hi)
         mid = np.exp2(a + t * (b - a)) - 1.0
     else:
         mid = lo + t * (hi - lo)
-    return np.where(codes == 0, lo, np.where(codes == top, hi, mid))
+    return np.where(codes == 0, lo, np.where(codes == n, hi, mid))
 
 
 def _encode_unit(x: np.ndarray, bits: int, scale: float) -> np.ndarray:
@@ -489,8 +498,14 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float) -> d
         span = None if span is None else float(span)
         ranges = {}
         for name, rows in (("coherence", 1), ("kd", 3), ("ks", 1), ("shininess", 1)):
-            r = [[float(lo), float(hi)] for lo, hi in params["ranges"][name]]
-            if len(r) != rows or not all(math.isfinite(x) for x in np.ravel(r)):
+            r = [[float(lo), float(hi), n] for lo, hi, n in params["ranges"][name]]
+            b = getattr(bits, name)
+            ok = len(r) == rows and all(
+                math.isfinite(lo) and math.isfinite(hi) and 0 <= lo <= hi
+                and not isinstance(n, bool) and isinstance(n, int) and 0 <= n < 2**b
+                for lo, hi, n in r
+            )  # fmt: skip
+            if not ok:
                 raise ValueError(f"range of {name} is {r}")
             ranges[name] = r
     except (KeyError, TypeError, ValueError) as exc:
