@@ -15,9 +15,9 @@ density sphere from the entries alone); the ``... N bits`` rows try other
 bit counts for one field (``--bits`` measures other defaults). PSNR inside the object's box in the truth image
 (its pixels with alpha > 0, plus 8 px), 8-bit values.
 
-Scenes are names of ``aniso3d.build.scenes.SCENES`` (``tree8`` is
-``scenes.tree(levels=8)``, about 4M triangles); unknown names are skipped
-with a note. The table goes to stdout and, with ``--md``, between the
+Scenes are names of ``aniso3d.build.scenes.SCENES``, ``tree8``
+(``scenes.tree(levels=8)``, about 4M triangles) or ``tilted`` (a square
+turned off the axes); unknown names are skipped with a note. The table goes to stdout and, with ``--md``, between the
 markers ``<!-- bench_encoding:begin -->`` and ``<!-- bench_encoding:end -->``
 of that Markdown file (the prose around them is kept).
 
@@ -49,7 +49,7 @@ from aniso3d.render.context import GLContext
 from aniso3d.render.renderer import Renderer
 
 BEGIN, END = "<!-- bench_encoding:begin -->", "<!-- bench_encoding:end -->"
-DEFAULT_SCENES = ("tree", "tree8", "cube", "sphere", "bush", "grass", "lattice", "fur", "shell", "blob",
+DEFAULT_SCENES = ("tree", "tree8", "cube", "sphere", "quad", "tilted", "bush", "grass", "lattice", "fur", "shell", "blob",
                   "room", "mixed")  # fmt: skip
 AZIMUTH, ELEVATION = 30.0, 15.0
 
@@ -78,9 +78,23 @@ ALTERNATIVES = (
 RENDERS = (("volume", {}), ("splat", {"quality": "high"}))
 
 
+def tilted() -> Mesh:
+    """A unit square turned off every axis (normal about (0.3, 0.5, 0.81)):
+    a flat surface whose centroids and normals fall between the grid's steps."""
+    q = scenes.quad()
+    a, b = np.radians(31.0), np.radians(17.0)
+    rx = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    ry = np.array([[np.cos(b), 0, np.sin(b)], [0, 1, 0], [-np.sin(b), 0, np.cos(b)]])
+    return Mesh.from_arrays(q.vertices @ (ry @ rx).T, q.faces, q.kd, q.ks, q.shininess, name="tilted")
+
+
+#: Scenes made here: the 4M-triangle tree and a tilted square.
+EXTRA = {"tree8": lambda: scenes.tree(levels=8), "tilted": tilted}
+
+
 def get_mesh(name: str) -> Mesh | None:
-    if name == "tree8":
-        return scenes.tree(levels=8)
+    if name in EXTRA:
+        return EXTRA[name]()
     if name not in scenes.SCENES:
         return None
     return scenes.SCENES[name]()

@@ -189,10 +189,13 @@ def test_range_unit_and_centroid_quantisers_are_within_half_a_step():
     coords = rng.integers(0, 50, (1000, 3))
     cent = origin + (coords + rng.uniform(0, 1, (1000, 3))) * h
     voxel = np.arange(1000)
-    for bits in (4, 8, 12):
+    cent[:3] = origin + (coords[:3] + [[0.0, 0.5, 1.0], [0.5, 0.5, 0.5], [1.0, 0.0, 0.5]]) * h
+    for bits in (2, 4, 8, 12):
         codes = enc._encode_centroid(cent, origin, h, coords, voxel, bits)
         got = enc._decode_centroid(codes, origin, h, coords, voxel, bits)
-        assert np.max(np.abs(got - cent)) <= h / 2 ** (bits + 1) * (1 + 1e-9)
+        assert np.max(np.abs(got - cent)) <= h / (2 * (2**bits - 2)) * (1 + 1e-9)
+        # the voxel's faces and middle plane are exact (axis-aligned surfaces)
+        np.testing.assert_allclose(got[:3], cent[:3], rtol=0, atol=1e-13)
 
 
 def test_facet_density_is_the_entries_projected_area():
@@ -211,7 +214,7 @@ def test_facet_density_is_the_entries_projected_area():
 
 
 def test_bits_are_checked():
-    for bad in (dict(area=1), dict(normal=17), dict(kd=0), dict(density=-1), dict(ks=True), dict(centroid=8.0)):
+    for bad in (dict(area=1), dict(normal=17), dict(centroid=1), dict(kd=0), dict(density=-1), dict(ks=True), dict(centroid=8.0)):
         with pytest.raises(InputError, match="bits for"):
             Bits(**bad)
     assert Bits(density=0).density == 0
@@ -249,8 +252,8 @@ def assert_within_bounds(tex: AnisoTexture, got: AnisoTexture, bits: Bits = DEFA
     ell = np.minimum(length, 1)
     half = 1 / (2 * (2**bits.coherence - 1))
     assert np.max(np.abs(np.linalg.norm(n2, axis=1) - ell), initial=0) <= half + 1e-6
-    # centroids: h / 2**(bits + 1) per axis
-    assert np.max(np.abs(got.entry_centroid - tex.entry_centroid)) <= h / 2 ** (bits.centroid + 1) * (1 + 1e-9)
+    # centroids: h / 2 (2**bits - 2) per axis
+    assert np.max(np.abs(got.entry_centroid - tex.entry_centroid)) <= h / (2 * (2**bits.centroid - 2)) * (1 + 1e-9)
     # materials: steps of at most S / (2**bits - 1), ends exact
     for name, log in (("entry_kd", False), ("entry_ks", False), ("entry_shininess", True)):
         x = getattr(tex, name).astype(np.float64).reshape(len(a), -1)
@@ -475,6 +478,7 @@ DAMAGED = [
      "range of ks"),
     ("ranges short", dict(header=lambda h: h["params"]["ranges"].update(kd=[[0, 1, 3]])), "range of kd"),
     ("range steps", dict(header=lambda h: h["params"]["ranges"].update(ks=[[0, 1, 300]])), "range of ks"),
+    ("centroid past voxel", dict(members=_set("entry_centroid", lambda a: a | np.uint8(0xFF))), "past the voxel"),
     ("codes past range", dict(header=lambda h: h["params"]["ranges"]["kd"][0].__setitem__(2, 1)),
      "codes past its range"),
     ("coords repeat", dict(members=_set("coords", lambda a: np.concatenate([a, a[:, -1:] * 0], axis=1))),

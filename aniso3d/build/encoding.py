@@ -84,7 +84,8 @@ class Bits:
 
     ``density`` 0 stores no residual: the density sphere is then derived
     from the entries alone. Each count lies in 1..16 (2..16 for ``area``, whose
-    code 0 means a zero area, and ``normal``, a signed coordinate).
+    code 0 means a zero area, ``normal``, a signed coordinate, and
+    ``centroid``, whose steps number ``2**bits - 2``).
     """
 
     area: int = 12
@@ -98,7 +99,7 @@ class Bits:
 
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():
-            low = 0 if name == "density" else 2 if name in ("area", "normal") else 1
+            low = 0 if name == "density" else 2 if name in ("area", "normal", "centroid") else 1
             if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= 16:
                 raise InputError(f"bits for '{name}' must be a whole number in {low}..16, got {value!r}")
 
@@ -344,15 +345,17 @@ def _decode_unit(codes: np.ndarray, bits: int, scale: float) -> np.ndarray:
 
 
 def _encode_centroid(centroid, origin, voxel_size, coords, voxel, bits) -> np.ndarray:
-    """(3, E) codes of each centroid's offset in its voxel: ``floor(f * 2**bits)``
-    of f in [0, 1) per axis, decoded at the middle of its step."""
+    """(3, E) codes of each centroid's offset f in [0, 1] inside its voxel,
+    per axis: ``round(f * n)`` with ``n = 2**bits - 2`` (even), so the voxel's
+    faces and middle plane (0, 1/2, 1: axis-aligned surfaces) are exact and
+    the rest within ``h / 2n``."""
     f = (np.asarray(centroid, dtype=np.float64) - origin) / voxel_size - coords[voxel]
-    n = 2**bits
-    return np.clip(np.floor(f * n), 0, n - 1).astype(np.uint16).T
+    n = 2**bits - 2
+    return np.round(np.clip(f, 0.0, 1.0) * n).astype(np.uint16).T
 
 
 def _decode_centroid(codes, origin, voxel_size, coords, voxel, bits) -> np.ndarray:
-    f = (codes.T.astype(np.float64) + 0.5) / 2**bits
+    f = codes.T.astype(np.float64) / (2**bits - 2)
     return origin + (coords[voxel] + f) * voxel_size
 
 
@@ -537,8 +540,11 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float) -> d
     nb = bits.normal if span is not None else oct_bits(bits)
     normal = _decode_normal(codes("entry_normal", 2, nb), codes("entry_coherence", 1, bits.coherence),
                             ranges["coherence"], bits, span, dirs[direction])  # fmt: skip
+    centroid_codes = codes("entry_centroid", 3, bits.centroid)
+    if centroid_codes.size and int(centroid_codes.max()) > 2**bits.centroid - 2:
+        raise FormatError("entry_centroid holds codes past the voxel")
     centroid = _decode_centroid(
-        codes("entry_centroid", 3, bits.centroid), origin, float(voxel_size), coords.astype(np.int64), voxel,
+        centroid_codes, origin, float(voxel_size), coords.astype(np.int64), voxel,
         bits.centroid,
     )  # fmt: skip
     kd = _decode_range(codes("entry_kd", 3, bits.kd), bits.kd, ranges["kd"]).T

@@ -260,7 +260,11 @@ class AnisoTexture:
         with stated error bounds); ``"exact"`` keeps the arrays bit for bit
         (deflated).
         """
-        return write_texture_file(path, self._arrays(), self.voxel_size, self.meta, encoding, bits)
+        out = write_texture_file(path, self._arrays(), self.voxel_size, self.meta, encoding, bits)
+        if encoding == "compact" and bits == DEFAULT_BITS:
+            # That is the file nbytes measures: no need to encode it again.
+            self.__dict__["nbytes"] = out.stat().st_size
+        return out
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> AnisoTexture:
