@@ -49,8 +49,8 @@ from aniso3d.render.context import GLContext
 from aniso3d.render.renderer import Renderer
 
 BEGIN, END = "<!-- bench_encoding:begin -->", "<!-- bench_encoding:end -->"
-DEFAULT_SCENES = ("tree", "tree8", "cube", "sphere", "quad", "tilted", "bush", "grass", "lattice", "fur", "shell", "blob",
-                  "room", "mixed")  # fmt: skip
+DEFAULT_SCENES = ("tree", "tree8", "cube", "sphere", "quad", "tilted", "bush", "grass", "lattice", "fur",
+                  "shell", "blob", "room", "mixed")  # fmt: skip
 AZIMUTH, ELEVATION = 30.0, 15.0
 
 #: Field -> (texture arrays it sets, file members that store it).
