@@ -10,8 +10,8 @@ x ``--gt-ssaa`` samples per pixel, of the volume renderer and of the
 high-quality splats, from the texture with that one field as the file
 stores it and every other field as built, minus the same from the texture
 as built. ``all`` quantises everything (what loading the file gives);
-``density derived`` drops the stored residual (``Bits(density=0)``: the
-density sphere from the entries alone); the ``... N bits`` rows try other
+``density`` is the density sphere as the file gives it (the entries' own
+``F`` plus a coarse residual); the ``... N bits`` rows try finer
 bit counts for one field (``--bits`` measures other defaults). PSNR inside the object's box in the truth image
 (its pixels with alpha > 0, plus 8 px), 8-bit values.
 
@@ -66,13 +66,15 @@ FIELDS = {
 #: which sample directions each voxel has entries at (exact), the header.
 STRUCTURE = ("origin", "shape", "directions", "coords", "entry_mask")
 
-#: (row name, field, bits): other bit counts tried for one field.
+#: (row name, field, bits changed): other bit counts tried for one field
+#: (finer than the defaults: what each extra bit would cost and buy).
 ALTERNATIVES = (
-    ("density derived", "density", {"density": 0}),
-    ("area 8 bits", "area", {"area": 8}),
-    ("normal 8 bits", "normal", {"normal": 8}),
-    ("centroid 6 bits", "centroid", {"centroid": 6}),
-    ("kd 6 bits", "kd", {"kd": 6}),
+    ("density derived, 0 bits", "density", {"density": 0}),
+    ("density 8 bits", "density", {"density": 8}),
+    ("area 12 bits", "area", {"area": 12}),
+    ("normal 10 bits", "normal", {"normal": 10, "coherence": 8}),
+    ("centroid 8 bits", "centroid", {"centroid": 8}),
+    ("kd 8 bits", "kd", {"kd": 8}),
 )
 
 RENDERS = (("volume", {}), ("splat", {"quality": "high"}))

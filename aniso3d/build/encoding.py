@@ -88,14 +88,14 @@ class Bits:
     ``centroid``, whose steps number ``2**bits - 2``).
     """
 
-    area: int = 12
-    normal: int = 10
-    coherence: int = 8
-    centroid: int = 8
-    kd: int = 8
+    area: int = 10
+    normal: int = 9
+    coherence: int = 6
+    centroid: int = 6
+    kd: int = 7
     ks: int = 8
     shininess: int = 8
-    density: int = 8
+    density: int = 3
 
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():
