@@ -214,7 +214,9 @@ def test_facet_density_is_the_entries_projected_area():
 
 
 def test_bits_are_checked():
-    for bad in (dict(area=1), dict(normal=17), dict(centroid=1), dict(kd=0), dict(density=-1), dict(ks=True), dict(centroid=8.0)):
+    bad_bits = (dict(area=1), dict(normal=17), dict(centroid=1), dict(kd=0), dict(density=-1), dict(ks=True),
+                dict(centroid=8.0))  # fmt: skip
+    for bad in bad_bits:
         with pytest.raises(InputError, match="bits for"):
             Bits(**bad)
     assert Bits(density=0).density == 0
