@@ -3,33 +3,44 @@
 In memory a texture keeps float64 and float32 arrays, about 400 bytes per
 occupied voxel of the default tree. To store it, each field is quantised no
 finer than the images need, and laid out so that deflate (the zip container's
-compression) finds what is left to squeeze. Loading decodes the same float
-arrays again. With the default :class:`Bits` (h the voxel edge; bounds are
-tested in tests/test_encoding.py):
+compression) finds what is left to squeeze: about 1/12 of the memory, 32
+bytes a voxel, for the default tree (docs/encoding.md). Loading decodes float
+arrays of the same dtypes again. With the default :class:`Bits` (h the voxel
+edge; every bound is tested in tests/test_encoding.py, the bits were chosen
+by ``demos/bench_encoding.py``: together they cost at most 0.03 dB of PSNR on
+the scenes measured there):
 
-============================  =================================================  ==========================
-field                         stored as                                          error
-============================  =================================================  ==========================
-origin, shape, directions     as they are                                        exact
-coords                        sorted cell keys, delta-coded, in byte planes      exact
-entry_offsets, _direction     one bit per voxel and sample direction (M, K/8)    exact
-entry_area                    log2, 12 bits, over [max / 2**24, max]             relative 0.2 %
-entry_normal (direction)      octahedral, 12 bits a coordinate                   0.02 degrees
-entry_normal (length)         8 bits on [0, 1]                                   1/510
-entry_centroid                8 bits a coordinate, offset inside its voxel       h/512 per axis
-entry_kd, entry_ks            8 bits on [0, max(1, largest value)]               1/510 of that range
-entry_shininess               8 bits of log2(1 + n) on [0, log2(1 + largest n)]  relative (1 + n): 0.9 %
-density                       the residual ``D - F`` (see below), 8 bits of A_v  A_v / 510
-============================  =================================================  ==========================
+==========================  ======================================================  ===============================
+field                       stored as                                               error (default bits)
+==========================  ======================================================  ===============================
+origin, shape, directions   as they are                                             exact
+coords                      sorted cell keys, delta-coded, in byte planes           exact
+entry_offsets, _direction   one bit per voxel and sample direction (M, K/8)         exact
+entry_area                  log2, 10 bits, over [max / 2**24, max]                  relative 0.82 %
+entry_normal (direction)    about the sample direction N_p, 9 bits a coordinate,    0.27 degrees (0.13 at K = 16);
+                            or octahedral with 11, whichever deflates smaller       0.12 degrees
+entry_normal (length)       6 bits, steps of 1/63                                   1/126
+entry_centroid              6 bits a coordinate: round(62 f), f its offset in the   h/124 per axis; faces and
+                            voxel                                                   middle of the voxel exact
+entry_kd                    7 bits: steps of S/127 over the values' own range,      S/254
+                            S = max(1, largest value)
+entry_ks                    8 bits, likewise                                        S/510
+entry_shininess             8 bits of log2(1 + n), likewise, S = log2(1 + largest)  log2(1 + n) within S/510
+density                     F (see below), plus D - F in 3 bits of A_v              min(D - F, A_v / 14)
+==========================  ======================================================  ===============================
+
+A range's two ends decode exactly, so a scene of one material keeps it
+exactly (two: both).
 
 The density sphere is not stored as such: ``F_v(p) = sum_e A_e |n_e . N_p|``
 over the voxel's entries (their area and mean normal, as decoded) is the
 part of ``D_v(p) = sum_s S_s |N_s . N_p|`` that the entries already hold;
 it is exact for entries whose facets are flat and never larger than D (the
-triangle inequality), and is 99.2 % of D over the default tree. Only the
-residual ``D - F`` is stored, in units of the voxel's registered area
-``A_v / (2**bits - 1)`` (``D <= A_v``); most of it is 0 and deflates to
-nearly nothing. ``bits.density = 0`` drops it (``D = F``).
+triangle inequality): 99.2 % of D over the default tree. Only the residual
+``D - F`` is stored, rounded to steps of the voxel's registered area
+``A_v / (2**bits - 1)`` (``D <= A_v``); rounding to the nearest step stores
+0 below half a step, so D is never farther than F alone. Most of it is 0
+and deflates to nearly nothing; ``bits.density = 0`` drops it (``D = F``).
 
 Every field's quantiser is a pair of functions here (``_encode_*`` and
 ``_decode_*``); :func:`encode` and :func:`decode` run them all. A code array

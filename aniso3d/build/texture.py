@@ -19,7 +19,7 @@ finer one (:mod:`aniso3d.build.pyramid`); :func:`entry_points` uses them to
 put points on the true surface. The ``.a3d`` file is
 :mod:`aniso3d.build.texture_file`'s business, and how it quantises the
 fields :mod:`aniso3d.build.encoding`'s: in memory the arrays stay float
-(:attr:`AnisoTexture.memory_nbytes`), stored they take about 1/50 of that
+(:attr:`AnisoTexture.memory_nbytes`), stored they take about 1/12 of that
 (:attr:`AnisoTexture.nbytes`).
 """
 
@@ -256,9 +256,9 @@ class AnisoTexture:
         with a SHA-256 of the arrays); loads without pickle. Written atomically.
 
         ``encoding="compact"`` (default) quantises every field with ``bits``
-        (:mod:`aniso3d.build.encoding`: about 1/50 of :attr:`memory_nbytes`,
-        with stated error bounds); ``"exact"`` keeps the arrays bit for bit
-        (deflated).
+        (:mod:`aniso3d.build.encoding`: about 1/12 of :attr:`memory_nbytes`
+        for the default tree, with stated error bounds); ``"exact"`` keeps
+        the arrays bit for bit (deflated).
         """
         out = write_texture_file(path, self._arrays(), self.voxel_size, self.meta, encoding, bits)
         if encoding == "compact" and bits == DEFAULT_BITS:
