@@ -368,6 +368,7 @@ def test_unencodable_textures_are_refused_and_leave_no_file(tree_tex, tmp_path):
         (replace(tree_tex, entry_kd=bad_kd), "entry_kd' holds NaN"),
         (replace(tree_tex, entry_area=-tree_tex.entry_area), "entry_area' holds negative"),
         (replace(tree_tex, coords=tree_tex.coords[::-1].copy(), density=tree_tex.density[::-1].copy()), "not sorted"),
+        (replace(tree_tex, entry_direction=tree_tex.entry_direction + 16), "entry_direction lies outside 0..15"),
     ]
     for tex, match in cases:
         with pytest.raises(InputError, match=match):

@@ -411,6 +411,9 @@ def _check_shapes(arrays: dict[str, np.ndarray]) -> None:
     off = np.asarray(arrays["entry_offsets"])
     if off[0] != 0 or off[-1] != e or np.any(np.diff(off) < 0):
         raise InputError("texture entry_offsets are not a valid CSR offset array; it cannot be encoded")
+    d = np.asarray(arrays["entry_direction"])
+    if e and (d.min() < 0 or d.max() >= k):
+        raise InputError(f"texture entry_direction lies outside 0..{k - 1}; it cannot be encoded")
 
 
 def _check_finite_nonnegative(arrays: dict[str, np.ndarray]) -> None:
