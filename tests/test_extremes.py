@@ -450,7 +450,7 @@ def test_voxels_denser_than_one_are_kept_as_they_are(tmp_path):
     assert tex.coverage(w)[0] == pytest.approx(want[pz] / 1.0, rel=1e-13)
     assert tex.coverage(w)[0] > 30
     assert tex.entry_area.sum() == pytest.approx(layers + 1e-6, rel=1e-13)
-    tex.save(tmp_path / "dense.a3d")
+    tex.save(tmp_path / "dense.a3d", encoding="exact")
     back = AnisoTexture.load(tmp_path / "dense.a3d")
     assert np.array_equal(back.density, tex.density)
     pts = tex.to_points()

@@ -166,7 +166,7 @@ def test_make_grid_levels_align():
 
 
 def test_coarse_level_saves(tree_pyr, tmp_path):
-    path = tree_pyr[2].save(tmp_path / "l2.a3d")
+    path = tree_pyr[2].save(tmp_path / "l2.a3d", encoding="exact")
     back = AnisoTexture.load(path)
     assert np.array_equal(back.density, tree_pyr[2].density)
     assert back.meta["lod_level"] == 2

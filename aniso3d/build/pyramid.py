@@ -125,9 +125,17 @@ class Pyramid(list):
 
     @property
     def nbytes(self) -> int:
-        """Bytes of all levels, the shared sample directions counted once."""
+        """Bytes of all levels as stored (:attr:`AnisoTexture.nbytes`), the
+        shared sample directions counted once."""
         d = int(np.asarray(self[0].directions).nbytes)
         return int(sum(t.nbytes for t in self) - d * (len(self) - 1))
+
+    @property
+    def memory_nbytes(self) -> int:
+        """Bytes of all levels' arrays in memory (:attr:`AnisoTexture.memory_nbytes`),
+        the shared sample directions counted once."""
+        d = int(np.asarray(self[0].directions).nbytes)
+        return int(sum(t.memory_nbytes for t in self) - d * (len(self) - 1))
 
     def level_stats(self) -> list[dict]:
         """Per level: resolution, voxel size, voxels, entries and bytes."""
@@ -361,3 +369,8 @@ class LodPoints:
     def nbytes(self) -> int:
         """Bytes of the pyramid (the level point clouds are made at upload)."""
         return self.pyramid.nbytes
+
+    @property
+    def memory_nbytes(self) -> int:
+        """Bytes of the pyramid in memory (the level point clouds are made at upload)."""
+        return self.pyramid.memory_nbytes

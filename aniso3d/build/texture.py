@@ -17,7 +17,10 @@ a flat patch and less for scattered facets, says how coherent they are). Both
 are linear sums, so a coarser texture can still be aggregated exactly from a
 finer one (:mod:`aniso3d.build.pyramid`); :func:`entry_points` uses them to
 put points on the true surface. The ``.a3d`` file is
-:mod:`aniso3d.build.texture_file`'s business.
+:mod:`aniso3d.build.texture_file`'s business, and how it quantises the
+fields :mod:`aniso3d.build.encoding`'s: in memory the arrays stay float
+(:attr:`AnisoTexture.memory_nbytes`), stored they take about 1/12 of that
+(:attr:`AnisoTexture.nbytes`).
 """
 
 from __future__ import annotations
@@ -25,15 +28,17 @@ from __future__ import annotations
 import os
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 import psutil
 
 from aniso3d.build.clip import Grid, clip_to_grid, make_grid, triangle_normals
+from aniso3d.build.encoding import ARRAYS, DEFAULT_BITS, Bits, decode, encode
 from aniso3d.build.mesh import Mesh
 from aniso3d.build.points import PointCloud
-from aniso3d.build.texture_file import ARRAYS, read_texture_file, write_texture_file
+from aniso3d.build.texture_file import encoded_size, read_texture_file, write_texture_file
 from aniso3d.errors import FormatError, InputError
 from aniso3d.grid import cell_coords, cell_keys, ranges, tangent_frame, weighted_means
 
@@ -182,15 +187,31 @@ class AnisoTexture:
         return self.grid.cell_centers(self.coords)
 
     @property
+    def memory_nbytes(self) -> int:
+        """Bytes of the arrays as held in memory (float64 density, areas and
+        centroids, float32 materials and normals): what computing with the
+        texture costs. :attr:`nbytes` is what storing it costs."""
+        return int(sum(np.asarray(getattr(self, n)).nbytes for n in ARRAYS if n not in ("origin", "shape")))
+
+    @cached_property
     def nbytes(self) -> int:
-        return int(
-            sum(
-                np.asarray(getattr(self, n)).nbytes
-                for n in ("coords", "directions", "density", "entry_offsets", "entry_direction",
-                          "entry_area", "entry_kd", "entry_ks", "entry_shininess",
-                          "entry_centroid", "entry_normal")
-            )
-        )  # fmt: skip
+        """Bytes of the texture as stored and shipped: the size of the ``.a3d``
+        file :meth:`save` writes by default (format version 2, compact
+        encoding, deflated; :mod:`aniso3d.build.encoding`), computed in memory
+        once. :attr:`memory_nbytes` is the size of the arrays in memory."""
+        return encoded_size(self._arrays(), self.voxel_size, self.meta)
+
+    def as_stored(self, bits: Bits = DEFAULT_BITS) -> AnisoTexture:
+        """The texture as a compact file stores it: what :meth:`load` returns
+        after :meth:`save` with these ``bits``, without a file (every field
+        quantised and decoded; see :mod:`aniso3d.build.encoding` for the
+        error of each)."""
+        members, params = encode(self._arrays(), self.voxel_size, bits)
+        return AnisoTexture(voxel_size=self.voxel_size, meta=dict(self.meta),
+                            **decode(members, params, self.voxel_size))  # fmt: skip
+
+    def _arrays(self) -> dict[str, np.ndarray]:
+        return {n: getattr(self, n) for n in ARRAYS}
 
     def total_area(self) -> float:
         """Registered facet area, world units squared (equals the mesh area)."""
@@ -227,18 +248,28 @@ class AnisoTexture:
 
     # ------------------------------------------------------------------ I/O
 
-    #: The arrays a texture file stores (see :mod:`aniso3d.build.texture_file`).
+    #: The arrays of a texture (see :mod:`aniso3d.build.encoding`).
     _ARRAYS = ARRAYS
 
-    def save(self, path: str | os.PathLike) -> Path:
+    def save(self, path: str | os.PathLike, encoding: str = "compact", bits: Bits = DEFAULT_BITS) -> Path:
         """Write a versioned ``.a3d`` file (a zip of .npy arrays and a JSON header
-        with a SHA-256 of the arrays); loads without pickle. Written atomically."""
-        arrays = {n: getattr(self, n) for n in ARRAYS}
-        return write_texture_file(path, arrays, self.voxel_size, self.meta)
+        with a SHA-256 of the arrays); loads without pickle. Written atomically.
+
+        ``encoding="compact"`` (default) quantises every field with ``bits``
+        (:mod:`aniso3d.build.encoding`: about 1/12 of :attr:`memory_nbytes`
+        for the default tree, with stated error bounds); ``"exact"`` keeps
+        the arrays bit for bit (deflated).
+        """
+        out = write_texture_file(path, self._arrays(), self.voxel_size, self.meta, encoding, bits)
+        if encoding == "compact" and bits == DEFAULT_BITS:
+            # That is the file nbytes measures: no need to encode it again.
+            self.__dict__["nbytes"] = out.stat().st_size
+        return out
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> AnisoTexture:
-        """Read a file written by :meth:`save`; refuse foreign, damaged or newer files."""
+        """Read a file written by :meth:`save` (any version up to the current
+        one); refuse foreign, damaged or newer files."""
         f = read_texture_file(path)
         try:
             return cls(voxel_size=f.voxel_size, meta=f.meta, **f.arrays)

@@ -106,7 +106,9 @@ class Cache:
     ) -> Any:  # fmt: skip
         """Keep ``value`` as made from ``source`` with ``key`` (replacing, and
         releasing, an earlier one); then evict to the bounds. Returns ``value``.
-        ``nbytes`` defaults to ``value.nbytes`` (0 if it has none)."""
+        ``nbytes`` defaults to the bytes ``value`` holds in memory:
+        ``value.memory_nbytes`` where it has one (a texture's ``nbytes`` is its
+        compressed, stored size), else ``value.nbytes`` (0 if it has none)."""
         self._flush()
         self._check_bounds()
         sid = id(source)
@@ -121,7 +123,7 @@ class Cache:
                 ref = _Strong(source)
             else:
                 self._watch[sid] = ref
-        size = int(getattr(value, "nbytes", 0) if nbytes is None else nbytes)
+        size = int(memory_bytes(value) if nbytes is None else nbytes)
         self._entries[k] = _Entry(ref, value, size, release)
         self._by_source.setdefault(sid, set()).add(key)
         self._evict()
@@ -217,3 +219,11 @@ class Cache:
             entry = self._pending.pop()
             if entry.release is not None:
                 entry.release(entry.value)
+
+
+def memory_bytes(value: Any) -> int:
+    """Bytes ``value`` holds in memory: ``memory_nbytes`` where it has one,
+    else ``nbytes``, else 0."""
+    if hasattr(value, "memory_nbytes"):
+        return int(value.memory_nbytes)
+    return int(getattr(value, "nbytes", 0))

@@ -1,0 +1,605 @@
+"""The compact encoding of a texture: what an ``.a3d`` file of version 2 stores.
+
+In memory a texture keeps float64 and float32 arrays, about 400 bytes per
+occupied voxel of the default tree. To store it, each field is quantised no
+finer than the images need, and laid out so that deflate (the zip container's
+compression) finds what is left to squeeze: about 1/12 of the memory, 32
+bytes a voxel, for the default tree (docs/encoding.md). Loading decodes float
+arrays of the same dtypes again. With the default :class:`Bits` (h the voxel
+edge; every bound is tested in tests/test_encoding.py, the bits were chosen
+by ``demos/bench_encoding.py``: together they cost at most 0.03 dB of PSNR on
+the scenes measured there):
+
+==========================  ======================================================  ===============================
+field                       stored as                                               error (default bits)
+==========================  ======================================================  ===============================
+origin, shape, directions   as they are                                             exact
+coords                      sorted cell keys, delta-coded, in byte planes           exact
+entry_offsets, _direction   one bit per voxel and sample direction (M, K/8)         exact
+entry_area                  log2, 10 bits, over [max / 2**24, max]                  relative 0.82 %
+entry_normal (direction)    about the sample direction N_p, 9 bits a coordinate,    0.27 degrees (0.13 at K = 16);
+                            or octahedral with 11, whichever deflates smaller       0.12 degrees
+entry_normal (length)       6 bits, steps of 1/63                                   1/126
+entry_centroid              6 bits a coordinate: round(62 f), f its offset in the   h/124 per axis; faces and
+                            voxel                                                   middle of the voxel exact
+entry_kd                    7 bits: steps of S/127 over the values' own range,      S/254
+                            S = max(1, largest value)
+entry_ks                    8 bits, likewise                                        S/510
+entry_shininess             8 bits of log2(1 + n), likewise, S = log2(1 + largest)  log2(1 + n) within S/510
+density                     F (see below), plus D - F in 3 bits of A_v              min(D - F, A_v / 14)
+==========================  ======================================================  ===============================
+
+A range's two ends decode exactly, so a scene of one material keeps it
+exactly (two: both).
+
+The density sphere is not stored as such: ``F_v(p) = sum_e A_e |n_e . N_p|``
+over the voxel's entries (their area and mean normal, as decoded) is the
+part of ``D_v(p) = sum_s S_s |N_s . N_p|`` that the entries already hold;
+it is exact for entries whose facets are flat and never larger than D (the
+triangle inequality): 99.2 % of D over the default tree. Only the residual
+``D - F`` is stored, rounded to steps of the voxel's registered area
+``A_v / (2**bits - 1)`` (``D <= A_v``); rounding to the nearest step stores
+0 below half a step, so D is never farther than F alone. Most of it is 0
+and deflates to nearly nothing; ``bits.density = 0`` drops it (``D = F``).
+
+Every field's quantiser is a pair of functions here (``_encode_*`` and
+``_decode_*``); :func:`encode` and :func:`decode` run them all. A code array
+of b bits is one uint8 (b <= 8) or uint16 array, stored as byte planes (all
+low bytes, then all high bytes) so that the mostly empty high bytes deflate
+away.
+
+Registration guarantees what the encoding assumes: coords sorted and inside
+the grid, each voxel's entries sorted by sample direction without repeats,
+areas, materials and density finite and not negative, centroids inside their
+voxel and ``F <= D <= A_v``. A texture breaking the first four is refused
+(:class:`~aniso3d.errors.InputError`); centroids and densities outside their
+ranges are clamped to them.
+"""
+
+from __future__ import annotations
+
+import math
+import zlib
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from aniso3d.errors import FormatError, InputError
+from aniso3d.grid import cell_coords, cell_keys, tangent_frame
+
+#: The arrays of a texture (the fields of :class:`aniso3d.build.texture.AnisoTexture`
+#: that hold arrays), what :func:`decode` returns and version 1 files store as they are.
+ARRAYS = ("origin", "shape", "coords", "directions", "density", "entry_offsets",
+          "entry_direction", "entry_area", "entry_kd", "entry_ks", "entry_shininess",
+          "entry_centroid", "entry_normal")  # fmt: skip
+
+#: The members of the compact encoding, in the order they are written.
+MEMBERS = ("origin", "shape", "directions", "coords", "entry_mask", "entry_area",
+           "entry_normal", "entry_coherence", "entry_centroid", "entry_kd", "entry_ks",
+           "entry_shininess", "density")  # fmt: skip
+
+#: Areas below ``max area / 2**AREA_SPAN`` are stored as that (an absolute
+#: error below 6e-8 of the largest entry's area): keeps the log range, and so
+#: the step, small whatever the smallest sliver is.
+AREA_SPAN = 24.0
+#: Mean normals are stored about their sample direction (:func:`_encode_frame`)
+#: when none lies farther than this from it, in degrees; else octahedral.
+FRAME_MAX_ANGLE = 60.0
+#: Entries' decoded F(p) are summed in batches of this many entries (E x K products).
+DENSITY_BATCH = 1 << 18
+
+
+@dataclass(frozen=True)
+class Bits:
+    """Bits per stored value of each quantised field (see the module table).
+
+    ``density`` 0 stores no residual: the density sphere is then derived
+    from the entries alone. Each count lies in 1..16 (2..16 for ``area``, whose
+    code 0 means a zero area, ``normal``, a signed coordinate, and
+    ``centroid``, whose steps number ``2**bits - 2``).
+    """
+
+    area: int = 10
+    normal: int = 9
+    coherence: int = 6
+    centroid: int = 6
+    kd: int = 7
+    ks: int = 8
+    shininess: int = 8
+    density: int = 3
+
+    def __post_init__(self) -> None:
+        for name, value in asdict(self).items():
+            low = 0 if name == "density" else 2 if name in ("area", "normal", "centroid") else 1
+            if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= 16:
+                raise InputError(f"bits for '{name}' must be a whole number in {low}..16, got {value!r}")
+
+
+DEFAULT_BITS = Bits()
+
+
+# ------------------------------------------------------------------ byte planes
+
+
+def _width(bits: int) -> int:
+    """Bytes of one code of ``bits`` bits (1 or 2)."""
+    return 1 if bits <= 8 else 2
+
+
+def to_planes(codes: np.ndarray, width: int) -> np.ndarray:
+    """(R, N) unsigned codes -> (R * width, N) uint8 byte planes: for each row
+    its low bytes, then the next bytes, little-endian."""
+    c = np.ascontiguousarray(np.atleast_2d(codes), dtype=f"<u{width}")
+    rows, n = c.shape
+    return np.ascontiguousarray(c.view(np.uint8).reshape(rows, n, width).transpose(0, 2, 1)).reshape(
+        rows * width, n
+    )
+
+
+def from_planes(planes: np.ndarray, rows: int, width: int) -> np.ndarray:
+    """The inverse of :func:`to_planes`: (rows, N) unsigned codes of ``width`` bytes."""
+    n = planes.shape[1]
+    b = np.ascontiguousarray(planes.reshape(rows, width, n).transpose(0, 2, 1))
+    return b.view(f"<u{width}").reshape(rows, n)
+
+
+# ------------------------------------------------------------------- quantisers
+
+
+def _encode_keys(coords: np.ndarray, shape: np.ndarray) -> np.ndarray:
+    """Sorted cell keys as deltas (the first key itself), in the fewest of 1,
+    2, 4 or 8 bytes that hold them all: (width, M) byte planes."""
+    keys = cell_keys(coords, shape)
+    if len(keys) > 1 and np.any(np.diff(keys) <= 0):
+        raise InputError("texture coords are not sorted by cell or repeat a cell; they cannot be encoded")
+    delta = np.diff(keys, prepend=0).astype(np.uint64)
+    top = int(delta.max()) if len(delta) else 0
+    width = next(w for w in (1, 2, 4, 8) if top < 256**w)
+    return to_planes(delta, width)
+
+
+def _decode_keys(planes: np.ndarray, shape: np.ndarray) -> np.ndarray:
+    width = planes.shape[0]
+    if width not in (1, 2, 4, 8):
+        raise FormatError(f"coords has {width} byte planes, expected 1, 2, 4 or 8")
+    delta = from_planes(planes, 1, width)[0].astype(np.uint64)
+    if len(delta) > 1 and np.any(delta[1:] == 0):
+        raise FormatError("coords repeat a cell")
+    keys = np.cumsum(delta, dtype=np.uint64)
+    cells = int(np.prod(np.asarray(shape, dtype=np.int64)))
+    if len(keys) and int(keys[-1]) >= cells:
+        raise FormatError("coords lie outside the grid")
+    return cell_coords(keys.astype(np.int64), shape).astype(np.int32)
+
+
+def _encode_mask(offsets: np.ndarray, direction: np.ndarray, k: int) -> np.ndarray:
+    """(M, ceil(K / 8)) uint8: bit p of voxel v set when v has an entry at
+    sample p (entries sorted by direction within a voxel, as registration makes them)."""
+    m = len(offsets) - 1
+    voxel = np.repeat(np.arange(m), np.diff(offsets))
+    d = np.asarray(direction, dtype=np.int64)
+    if len(d) and (d.min() < 0 or d.max() >= k):
+        raise InputError(f"texture entry_direction lies outside 0..{k - 1}; it cannot be encoded")
+    key = voxel * k + d
+    if len(key) > 1 and np.any(np.diff(key) <= 0):
+        raise InputError(
+            "texture entries are not sorted by sample direction within each voxel, or repeat one; "
+            "they cannot be encoded"
+        )
+    occupied = np.zeros((m, k), dtype=bool)
+    occupied[voxel, d] = True
+    return np.packbits(occupied, axis=1)
+
+
+def _decode_mask(mask: np.ndarray, m: int, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """(offsets (M + 1,) int64, direction (E,) int32) from the occupancy mask."""
+    if mask.shape != (m, (k + 7) // 8):
+        raise FormatError(f"entry_mask has shape {mask.shape}, expected {(m, (k + 7) // 8)}")
+    occupied = np.unpackbits(mask, axis=1, count=k).astype(bool) if m else np.zeros((0, k), bool)
+    if k % 8 and np.any(np.unpackbits(mask, axis=1)[:, k:]):
+        raise FormatError("entry_mask sets bits past the last sample direction")
+    voxel, d = np.nonzero(occupied)
+    offsets = np.zeros(m + 1, dtype=np.int64)
+    offsets[1:] = np.cumsum(np.bincount(voxel, minlength=m))
+    return offsets, d.astype(np.int32)
+
+
+def _encode_log(a: np.ndarray, bits: int) -> tuple[np.ndarray, list[float]]:
+    """Positive values as ``1 + round((log2 a - lo) / (hi - lo) * (2**bits - 2))``
+    over ``[lo, hi] = [max(log2 min, hi - AREA_SPAN), log2 max]``, 0 as 0."""
+    a = np.asarray(a, dtype=np.float64)
+    pos = a > 0
+    if not pos.any():
+        return np.zeros(len(a), dtype=np.uint16), [0.0, 0.0]
+    hi = float(np.log2(a.max()))
+    lo = max(float(np.log2(a[pos].min())), hi - AREA_SPAN)
+    steps = 2**bits - 2
+    t = (np.log2(np.maximum(a, 2.0**lo)) - lo) / (hi - lo) if hi > lo else np.zeros(len(a))
+    codes = np.where(pos, 1 + np.round(np.clip(t, 0.0, 1.0) * steps), 0)
+    return codes.astype(np.uint16), [lo, hi]
+
+
+def _decode_log(codes: np.ndarray, bits: int, span: list[float]) -> np.ndarray:
+    lo, hi = span
+    steps = 2**bits - 2
+    value = np.exp2(lo + (codes.astype(np.float64) - 1.0) * ((hi - lo) / steps))
+    return np.where(codes > 0, value, 0.0)
+
+
+def _encode_oct(v: np.ndarray, bits: int) -> np.ndarray:
+    """(2, E) codes of unit vectors ``v`` (E, 3) on the octahedron, each
+    coordinate rounded symmetrically to ``2**(bits-1) - 1`` steps a side (so
+    0 and +-1, the axes, are exact)."""
+    v = np.asarray(v, dtype=np.float64)
+    s = np.abs(v).sum(axis=1)
+    p = v[:, :2] / np.where(s > 0, s, 1.0)[:, None]
+    sign = np.where(p >= 0, 1.0, -1.0)
+    p = np.where((v[:, 2] < 0)[:, None], (1.0 - np.abs(p[:, ::-1])) * sign, p)
+    m = 2 ** (bits - 1) - 1
+    return (np.round(np.clip(p, -1.0, 1.0) * m) + m).astype(np.uint16).T
+
+
+def _decode_oct(codes: np.ndarray, bits: int) -> np.ndarray:
+    m = 2 ** (bits - 1) - 1
+    p = (codes.T.astype(np.float64) - m) / m
+    z = 1.0 - np.abs(p).sum(axis=1)
+    sign = np.where(p >= 0, 1.0, -1.0)
+    p = np.where((z < 0)[:, None], (1.0 - np.abs(p[:, ::-1])) * sign, p)
+    v = np.column_stack([p, z])
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def _encode_frame(v: np.ndarray, sample: np.ndarray, bits: int, span: float) -> np.ndarray:
+    """(2, E) codes of unit vectors ``v`` (E, 3) as the point where they meet
+    the plane tangent to their sample direction ``sample`` (E, 3) at distance 1
+    (gnomonic coordinates along :func:`~aniso3d.grid.tangent_frame`), each
+    rounded to ``2**(bits-1) - 1`` steps on ``[-span, span]``. Needs
+    ``v . sample > 0``; registration puts every mean normal inside its sample
+    direction's Voronoi cell, so the coordinates stay small."""
+    t, b = tangent_frame(sample)
+    c = np.sum(v * sample, axis=1)
+    g = np.stack([np.sum(v * t, axis=1), np.sum(v * b, axis=1)]) / c
+    m = 2 ** (bits - 1) - 1
+    scaled = g / span if span > 0 else np.zeros_like(g)
+    return (np.round(np.clip(scaled, -1.0, 1.0) * m) + m).astype(np.uint16)
+
+
+def _decode_frame(codes: np.ndarray, sample: np.ndarray, bits: int, span: float) -> np.ndarray:
+    m = 2 ** (bits - 1) - 1
+    g = (codes.astype(np.float64) - m) / m * span
+    t, b = tangent_frame(sample)
+    v = sample + g[0][:, None] * t + g[1][:, None] * b
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def _frame_span(v: np.ndarray, sample: np.ndarray) -> float | None:
+    """The largest gnomonic coordinate of unit vectors ``v`` about their sample
+    directions, or None when one lies more than ``FRAME_MAX_ANGLE`` from its
+    sample direction (then the octahedral map serves better)."""
+    if not len(v):
+        return 0.0
+    c = np.sum(v * sample, axis=1)
+    if c.min() < np.cos(np.radians(FRAME_MAX_ANGLE)):
+        return None
+    t, b = tangent_frame(sample)
+    return float(np.max(np.abs(np.stack([np.sum(v * t, axis=1), np.sum(v * b, axis=1)]) / c)))
+
+
+def oct_bits(bits: Bits) -> int:
+    """Bits a coordinate of the octahedral map gets: two more than about a
+    sample direction (whose plane spans 2 tan 40 degrees or so, against the
+    map's 2 for the whole sphere), so the two are about as precise (at most 16)."""
+    return min(16, bits.normal + 2)
+
+
+def _deflated(codes: np.ndarray, bits: int) -> int:
+    """Bytes of ``codes`` as stored byte planes once deflated (zlib's default level)."""
+    return len(zlib.compress(to_planes(codes, _width(bits)).tobytes()))
+
+
+def _decode_normal(codes: np.ndarray, length: np.ndarray, length_range: list, bits: Bits, span: float | None,
+                   sample: np.ndarray) -> np.ndarray:  # fmt: skip
+    """(E, 3) float32 mean normals from their direction codes (2, E), in the
+    sample frame (``span``) or octahedral (``span`` None), and length codes
+    (1, E) on ``length_range``. float32 as built; F is computed from these
+    very values by encoder and decoder, so that decoded D >= F exactly."""
+    unit = _decode_oct(codes, oct_bits(bits)) if span is None else _decode_frame(codes, sample, bits.normal, span)
+    scale = _decode_range(np.atleast_2d(length), bits.coherence, length_range)[0]
+    return (unit * scale[:, None]).astype(np.float32)
+
+
+def _encode_range(x: np.ndarray, bits: int, log: bool = False) -> tuple[np.ndarray, list[list[float]]]:
+    """(R, N) codes of the rows of ``x`` (R, N), non-negative, each on its own
+    range ``[lo, hi]`` cut into ``n`` equal steps no longer than
+    ``S / (2**bits - 1)``, with ``S = max(1, largest value)`` (or, when ``log``,
+    steps of ``log2(1 + x)`` with ``S = log2(1 + largest)``): the precision of
+    ``bits`` bits over ``[0, S]``, spent only where the values are. Returns
+    the codes and ``[lo, hi, n]`` per row. Both ends decode exactly (one
+    material is exact, two are at the ends); the rest within half a step."""
+    x = np.atleast_2d(np.asarray(x, dtype=np.float64))
+    f = (lambda v: np.log2(1.0 + v)) if log else (lambda v: v)
+    top = 2**bits - 1
+    codes = np.zeros(x.shape, dtype=np.uint16)
+    ranges = []
+    for row in range(len(x)):  # a row per colour channel: at most 3
+        lo, hi = (float(x[row].min()), float(x[row].max())) if x.shape[1] else (0.0, 0.0)
+        a, b = f(lo), f(hi)
+        full = f(hi) if log else max(1.0, hi)
+        n = min(top, math.ceil((b - a) / full * top - 1e-9)) if b > a else 0
+        if n:
+            codes[row] = np.round(np.clip((f(x[row]) - a) / (b - a), 0.0, 1.0) * n)
+        ranges.append([lo, hi, n])
+    return codes, ranges
+
+
+def _decode_range(codes: np.ndarray, bits: int, ranges: list[list[float]], log: bool = False) -> np.ndarray:
+    lo, hi, n = (np.array([r[i] for r in ranges], dtype=np.float64)[:, None] for i in (0, 1, 2))
+    if codes.size and np.any(codes > n):
+        raise FormatError("a quantised field holds codes past its range")
+    t = codes.astype(np.float64) / np.maximum(n, 1)
+    if log:
+        a, b = np.log2(1.0 + lo), np.log2(1.0 + hi)
+        mid = np.exp2(a + t * (b - a)) - 1.0
+    else:
+        mid = lo + t * (hi - lo)
+    return np.where(codes == 0, lo, np.where(codes == n, hi, mid))
+
+
+def _encode_unit(x: np.ndarray, bits: int, scale: float) -> np.ndarray:
+    """``round(x / scale * (2**bits - 1))`` for x in [0, scale] (clamped)."""
+    top = 2**bits - 1
+    return np.round(np.clip(np.asarray(x, dtype=np.float64) / scale, 0.0, 1.0) * top).astype(np.uint16)
+
+
+def _decode_unit(codes: np.ndarray, bits: int, scale: float) -> np.ndarray:
+    return codes.astype(np.float64) / (2**bits - 1) * scale
+
+
+def _encode_centroid(centroid, origin, voxel_size, coords, voxel, bits) -> np.ndarray:
+    """(3, E) codes of each centroid's offset f in [0, 1] inside its voxel,
+    per axis: ``round(f * n)`` with ``n = 2**bits - 2`` (even), so the voxel's
+    faces and middle plane (0, 1/2, 1: axis-aligned surfaces) are exact and
+    the rest within ``h / 2n``."""
+    f = (np.asarray(centroid, dtype=np.float64) - origin) / voxel_size - coords[voxel]
+    n = 2**bits - 2
+    return np.round(np.clip(f, 0.0, 1.0) * n).astype(np.uint16).T
+
+
+def _decode_centroid(codes, origin, voxel_size, coords, voxel, bits) -> np.ndarray:
+    f = codes.T.astype(np.float64) / (2**bits - 2)
+    return origin + (coords[voxel] + f) * voxel_size
+
+
+def facet_density(area: np.ndarray, normal: np.ndarray, offsets: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """(M, K) float64 ``F_v(p) = sum_e A_e |n_e . N_p|`` over each voxel's
+    entries: the density sphere as far as the entries' areas (E,) and mean
+    normals (E, 3) know it (exact for flat entries, never above the true
+    density). Summed in batches of :data:`DENSITY_BATCH` entries."""
+    m, k = len(offsets) - 1, len(directions)
+    out = np.zeros((m, k))
+    voxel = np.repeat(np.arange(m), np.diff(offsets))
+    dirs = np.asarray(directions, dtype=np.float64)
+    for start in range(0, len(area), DENSITY_BATCH):
+        stop = min(len(area), start + DENSITY_BATCH)
+        part = np.abs(np.asarray(normal[start:stop], dtype=np.float64) @ dirs.T) * np.asarray(
+            area[start:stop], dtype=np.float64
+        )[:, None]
+        _add_rows(out, voxel[start:stop], part)
+    return out
+
+
+def _add_rows(out: np.ndarray, rows: np.ndarray, values: np.ndarray) -> None:
+    """``out[rows] += values`` for sorted ``rows`` with repeats (reduceat, not add.at)."""
+    starts = np.flatnonzero(np.diff(rows, prepend=-1))
+    out[rows[starts]] += np.add.reduceat(values, starts, axis=0)
+
+
+# ------------------------------------------------------------------- the whole
+
+
+def _check_shapes(arrays: dict[str, np.ndarray]) -> None:
+    """Refuse arrays that do not make one texture (what the compact encoding relies on)."""
+    m, k = len(arrays["coords"]), len(arrays["directions"])
+    e = len(arrays["entry_direction"])
+    want = {"origin": (3,), "shape": (3,), "coords": (m, 3), "directions": (k, 3), "density": (m, k),
+            "entry_offsets": (m + 1,), "entry_area": (e,), "entry_kd": (e, 3), "entry_ks": (e,),
+            "entry_shininess": (e,), "entry_centroid": (e, 3), "entry_normal": (e, 3)}  # fmt: skip
+    for name, shape in want.items():
+        got = np.shape(arrays[name])
+        if got != shape:
+            raise InputError(f"texture field '{name}' has shape {got}, expected {shape}; it cannot be encoded")
+    off = np.asarray(arrays["entry_offsets"])
+    if off[0] != 0 or off[-1] != e or np.any(np.diff(off) < 0):
+        raise InputError("texture entry_offsets are not a valid CSR offset array; it cannot be encoded")
+    d = np.asarray(arrays["entry_direction"])
+    if e and (d.min() < 0 or d.max() >= k):
+        raise InputError(f"texture entry_direction lies outside 0..{k - 1}; it cannot be encoded")
+
+
+def _check_finite_nonnegative(arrays: dict[str, np.ndarray]) -> None:
+    for name in ("density", "entry_area", "entry_kd", "entry_ks", "entry_shininess",
+                 "entry_centroid", "entry_normal", "directions", "origin"):  # fmt: skip
+        a = np.asarray(arrays[name])
+        if not np.isfinite(a).all():
+            raise InputError(f"texture field '{name}' holds NaN or infinite values; it cannot be encoded")
+        if name in ("density", "entry_area", "entry_kd", "entry_ks", "entry_shininess") and np.any(a < 0):
+            raise InputError(f"texture field '{name}' holds negative values; it cannot be encoded")
+
+
+def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAULT_BITS) -> tuple[dict, dict]:
+    """The compact encoding of a texture's ``arrays`` (every name of :data:`ARRAYS`).
+
+    Returns ``(members, params)``: ``members`` maps each name of :data:`MEMBERS`
+    (``density`` only when ``bits.density > 0``) to an array to store, and
+    ``params`` the JSON numbers :func:`decode` needs (the bits and each
+    quantiser's range). Deterministic: equal inputs give equal outputs.
+    """
+    _check_shapes(arrays)
+    _check_finite_nonnegative(arrays)
+    origin = np.asarray(arrays["origin"], dtype=np.float64)
+    shape = np.asarray(arrays["shape"], dtype=np.int64)
+    coords = np.asarray(arrays["coords"], dtype=np.int64)
+    dirs = np.asarray(arrays["directions"], dtype=np.float64)
+    offsets = np.asarray(arrays["entry_offsets"], dtype=np.int64)
+    k = len(dirs)
+    if len(coords) and (np.any(coords < 0) or np.any(coords >= shape)):
+        raise InputError("texture coords lie outside its grid shape; it cannot be encoded")
+    voxel = np.repeat(np.arange(len(coords)), np.diff(offsets))
+
+    area_codes, area_span = _encode_log(arrays["entry_area"], bits.area)
+    normal = np.asarray(arrays["entry_normal"], dtype=np.float64)
+    length = np.linalg.norm(normal, axis=1)
+    # A zero mean normal (facets that cancel) has no direction: any will do.
+    sample = dirs[np.asarray(arrays["entry_direction"], dtype=np.int64)]
+    unit = np.where((length > 0)[:, None], normal / np.where(length > 0, length, 1.0)[:, None], sample)
+    coherence_codes, coherence_range = _encode_range(np.minimum(length, 1.0), bits.coherence)
+    kd_codes, kd_range = _encode_range(np.asarray(arrays["entry_kd"]).T, bits.kd)
+    ks_codes, ks_range = _encode_range(arrays["entry_ks"], bits.ks)
+    sh_codes, sh_range = _encode_range(arrays["entry_shininess"], bits.shininess, log=True)
+    span = _frame_span(unit, sample)
+    normal_codes = _encode_oct(unit, oct_bits(bits))
+    if span is not None:
+        # Smooth surfaces: spatially adjacent normals are adjacent on the
+        # octahedral map, and deflate finds that; scattered facets (foliage)
+        # take fewer bytes about their sample directions. Keep the smaller.
+        framed = _encode_frame(unit, sample, bits.normal, span)
+        if _deflated(framed, bits.normal) < _deflated(normal_codes, oct_bits(bits)):
+            normal_codes = framed
+        else:
+            span = None
+    params = {
+        "bits": asdict(bits),
+        "area_log2_range": area_span,
+        "normal_frame_span": span,
+        "ranges": {"coherence": coherence_range, "kd": kd_range, "ks": ks_range, "shininess": sh_range},
+    }
+    members = {
+        "origin": origin,
+        "shape": shape,
+        "directions": dirs,
+        "coords": _encode_keys(coords, shape),
+        "entry_mask": _encode_mask(offsets, arrays["entry_direction"], k),
+        "entry_area": to_planes(area_codes, _width(bits.area)),
+        "entry_normal": to_planes(normal_codes, _width(bits.normal)),
+        "entry_coherence": to_planes(coherence_codes, _width(bits.coherence)),
+        "entry_centroid": to_planes(
+            _encode_centroid(arrays["entry_centroid"], origin, float(voxel_size), coords, voxel, bits.centroid),
+            _width(bits.centroid),
+        ),
+        "entry_kd": to_planes(kd_codes, _width(bits.kd)),
+        "entry_ks": to_planes(ks_codes, _width(bits.ks)),
+        "entry_shininess": to_planes(sh_codes, _width(bits.shininess)),
+    }
+    if bits.density:
+        # The residual against F of the *decoded* entries: what decode adds back.
+        area = _decode_log(area_codes, bits.area, area_span)
+        nrm = _decode_normal(normal_codes, coherence_codes, coherence_range, bits, span, sample)
+        f = facet_density(area, nrm, offsets, dirs)
+        a_v = np.bincount(voxel, weights=area, minlength=len(coords))
+        residual = np.asarray(arrays["density"], dtype=np.float64) - f
+        scale = np.where(a_v > 0, a_v, 1.0)[:, None]
+        codes = _encode_unit(residual / scale, bits.density, 1.0)
+        members["density"] = to_planes(codes.reshape(1, -1), _width(bits.density))
+    return members, params
+
+
+def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float) -> dict[str, np.ndarray]:
+    """The texture arrays (every name of :data:`ARRAYS`, dtypes as
+    :func:`~aniso3d.build.texture.build_texture` makes them) of a compact
+    encoding. Raises :class:`~aniso3d.errors.FormatError` naming what does
+    not fit when members or params are inconsistent."""
+    try:
+        bits = Bits(**params["bits"])
+        area_span = [float(x) for x in params["area_log2_range"]]
+        span = params["normal_frame_span"]
+        span = None if span is None else float(span)
+        ranges = {}
+        for name, rows in (("coherence", 1), ("kd", 3), ("ks", 1), ("shininess", 1)):
+            r = [[float(lo), float(hi), n] for lo, hi, n in params["ranges"][name]]
+            b = getattr(bits, name)
+            ok = len(r) == rows and all(
+                math.isfinite(lo) and math.isfinite(hi) and 0 <= lo <= hi
+                and not isinstance(n, bool) and isinstance(n, int) and 0 <= n < 2**b
+                for lo, hi, n in r
+            )  # fmt: skip
+            if not ok:
+                raise ValueError(f"range of {name} is {r}")
+            ranges[name] = r
+    except (KeyError, TypeError, ValueError) as exc:
+        raise FormatError(f"the encoding parameters are damaged ({exc})") from None
+    if len(area_span) != 2 or not all(math.isfinite(x) for x in (*area_span, 0.0 if span is None else span)):
+        raise FormatError("the encoding parameters are damaged (not finite numbers)")
+    origin = _shaped(members, "origin", np.float64, (3,))
+    shape = _shaped(members, "shape", np.int64, (3,))
+    if np.any(shape < 1):
+        raise FormatError(f"shape {shape.tolist()} is not a grid")
+    dirs = members["directions"]
+    if dirs.ndim != 2 or dirs.shape[1] != 3 or dirs.dtype != np.float64:
+        raise FormatError(f"directions has shape {dirs.shape} and dtype {dirs.dtype}, expected (K, 3) float64")
+    k = len(dirs)
+    coords = _decode_keys(_uint8(members, "coords", None), shape)
+    m = len(coords)
+    offsets, direction = _decode_mask(_uint8(members, "entry_mask", None), m, k)
+    e = len(direction)
+    voxel = np.repeat(np.arange(m), np.diff(offsets))
+
+    def codes(name: str, rows: int, b: int) -> np.ndarray:
+        planes = _uint8(members, name, (rows * _width(b), e))
+        c = from_planes(planes, rows, _width(b))
+        if c.size and int(c.max()) >= 2**b:
+            raise FormatError(f"{name} holds codes above {b} bits")
+        return c
+
+    area = _decode_log(codes("entry_area", 1, bits.area)[0], bits.area, area_span)
+    nb = bits.normal if span is not None else oct_bits(bits)
+    normal = _decode_normal(codes("entry_normal", 2, nb), codes("entry_coherence", 1, bits.coherence),
+                            ranges["coherence"], bits, span, dirs[direction])  # fmt: skip
+    centroid_codes = codes("entry_centroid", 3, bits.centroid)
+    if centroid_codes.size and int(centroid_codes.max()) > 2**bits.centroid - 2:
+        raise FormatError("entry_centroid holds codes past the voxel")
+    centroid = _decode_centroid(
+        centroid_codes, origin, float(voxel_size), coords.astype(np.int64), voxel,
+        bits.centroid,
+    )  # fmt: skip
+    kd = _decode_range(codes("entry_kd", 3, bits.kd), bits.kd, ranges["kd"]).T
+    ks = _decode_range(codes("entry_ks", 1, bits.ks), bits.ks, ranges["ks"])[0]
+    sh = _decode_range(codes("entry_shininess", 1, bits.shininess), bits.shininess, ranges["shininess"], log=True)[0]
+    density = facet_density(area, normal, offsets, dirs)
+    if bits.density:
+        w = _width(bits.density)
+        res = from_planes(_uint8(members, "density", (w, m * k)), 1, w)[0].reshape(m, k)
+        if res.size and int(res.max()) >= 2**bits.density:
+            raise FormatError(f"density holds codes above {bits.density} bits")
+        a_v = np.bincount(voxel, weights=area, minlength=m)
+        density += _decode_unit(res, bits.density, 1.0) * np.where(a_v > 0, a_v, 1.0)[:, None]
+    return {
+        "origin": origin,
+        "shape": shape,
+        "coords": coords,
+        "directions": dirs,
+        "density": density,
+        "entry_offsets": offsets,
+        "entry_direction": direction,
+        "entry_area": area,
+        "entry_kd": kd.astype(np.float32),
+        "entry_ks": ks.astype(np.float32),
+        "entry_shininess": np.maximum(sh, 0.0).astype(np.float32),
+        "entry_centroid": centroid,
+        "entry_normal": normal,
+    }
+
+
+def _shaped(members: dict, name: str, dtype, shape: tuple) -> np.ndarray:
+    a = members[name]
+    if a.dtype != dtype or a.shape != shape:
+        raise FormatError(f"{name} has shape {a.shape} and dtype {a.dtype}, expected {shape} {np.dtype(dtype)}")
+    return a
+
+
+def _uint8(members: dict, name: str, shape: tuple | None) -> np.ndarray:
+    a = members[name]
+    if a.dtype != np.uint8 or a.ndim != (2 if shape is None else len(shape)):
+        raise FormatError(f"{name} has shape {a.shape} and dtype {a.dtype}, expected uint8 byte planes")
+    if shape is not None and a.shape != shape:
+        raise FormatError(f"{name} has shape {a.shape}, expected {shape}")
+    return a

@@ -1,0 +1,538 @@
+"""The compact texture encoding (.a3d version 2): each quantiser against its
+stated error bound, the whole texture through a file, strict loading of
+damaged compact files, version 1 files, and what ``nbytes`` reports."""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import re
+import zipfile
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from aniso3d import AnisoTexture, FormatError, InputError, Mesh, build_texture, scenes, sphere_directions
+from aniso3d.app.cli import main as cli_main
+from aniso3d.app.common import format_bytes
+from aniso3d.build import encoding as enc
+from aniso3d.build.encoding import ARRAYS, DEFAULT_BITS, Bits, facet_density
+from aniso3d.build.pyramid import pyramid
+from aniso3d.build.texture_file import FORMAT_VERSION, read_texture_file
+
+DATA = Path(__file__).resolve().parent / "data"
+
+
+def small_tree():
+    return scenes.tree(levels=4, leaves_per_twig=20)
+
+
+@pytest.fixture(scope="module")
+def tree_tex():
+    return build_texture(small_tree(), 24, 16)
+
+
+@pytest.fixture(scope="module")
+def tree_file(tree_tex, tmp_path_factory):
+    return tree_tex.save(tmp_path_factory.mktemp("enc") / "tree.a3d")
+
+
+# ------------------------------------------------------------------ quantisers
+
+
+def test_byte_planes_round_trip_and_layout():
+    rng = np.random.default_rng(0)
+    codes = rng.integers(0, 2**16, (3, 1000)).astype(np.uint16)
+    planes = enc.to_planes(codes, 2)
+    assert planes.shape == (6, 1000) and planes.dtype == np.uint8
+    # row r: its low bytes, then its high bytes
+    assert np.array_equal(planes[0], codes[0] & 0xFF) and np.array_equal(planes[1], codes[0] >> 8)
+    assert np.array_equal(planes[5], codes[2] >> 8)
+    assert np.array_equal(enc.from_planes(planes, 3, 2), codes)
+    one = rng.integers(0, 256, (2, 7)).astype(np.uint8)
+    assert np.array_equal(enc.to_planes(one, 1), one)
+
+
+def test_cell_keys_round_trip_exactly_and_need_sorted_cells():
+    rng = np.random.default_rng(1)
+    shape = np.array([300, 200, 100])
+    keys = np.unique(rng.integers(0, shape.prod(), 5000))
+    coords = np.stack([keys // 20000, (keys // 100) % 200, keys % 100], axis=1)
+    planes = enc._encode_keys(coords, shape)
+    assert planes.shape[0] in (1, 2, 4)
+    assert np.array_equal(enc._decode_keys(planes, shape), coords)
+    with pytest.raises(InputError, match="not sorted"):
+        enc._encode_keys(coords[::-1], shape)
+    with pytest.raises(InputError, match="not sorted"):
+        enc._encode_keys(np.repeat(coords[:2], 2, axis=0), shape)
+    with pytest.raises(FormatError, match="outside the grid"):
+        enc._decode_keys(planes, np.array([3, 3, 3]))
+    with pytest.raises(FormatError, match="byte planes"):
+        enc._decode_keys(np.zeros((3, 4), np.uint8), shape)
+
+
+def test_occupancy_mask_round_trips_offsets_and_directions():
+    rng = np.random.default_rng(2)
+    for k in (1, 5, 16, 64, 100):
+        occupied = rng.random((50, k)) < 0.2
+        occupied[:, 0] |= ~occupied.any(axis=1)
+        voxel, d = np.nonzero(occupied)
+        offsets = np.concatenate([[0], np.cumsum(occupied.sum(axis=1))])
+        mask = enc._encode_mask(offsets, d, k)
+        assert mask.shape == (50, (k + 7) // 8)
+        got_off, got_d = enc._decode_mask(mask, 50, k)
+        assert np.array_equal(got_off, offsets) and np.array_equal(got_d, d)
+    with pytest.raises(InputError, match="not sorted"):
+        enc._encode_mask(np.array([0, 2]), np.array([3, 1]), 4)
+    with pytest.raises(InputError, match="outside"):
+        enc._encode_mask(np.array([0, 1]), np.array([4]), 4)
+    bad = np.full((1, 1), 0xFF, np.uint8)  # K = 5: bits 5..7 must be clear
+    with pytest.raises(FormatError, match="past the last"):
+        enc._decode_mask(bad, 1, 5)
+
+
+@pytest.mark.parametrize("bits", [8, 12, 16])
+def test_log_areas_are_within_their_relative_step(bits):
+    rng = np.random.default_rng(3)
+    a = np.concatenate([10.0 ** rng.uniform(-12, 1, 20000), [0.0, 0.0]])
+    codes, span = enc._encode_log(a, bits)
+    back = enc._decode_log(codes, bits, span)
+    lo, hi = span
+    assert hi == pytest.approx(np.log2(a.max()), abs=1e-12) and lo == pytest.approx(hi - enc.AREA_SPAN)
+    big = a >= 2.0**lo
+    # half a step in log2, plus float64 rounding
+    step = (hi - lo) / (2**bits - 2)
+    assert np.max(np.abs(np.log2(back[big]) - np.log2(a[big]))) <= step / 2 + 1e-12
+    small = (a > 0) & ~big
+    assert small.any() and np.all(back[small] <= 2.0 ** (lo + step / 2) + 1e-300) and np.all(back[small] > a[small])
+    assert np.all(back[a == 0] == 0.0)
+    # the default bits: 0.2 % relative
+    if bits == DEFAULT_BITS.area:
+        assert np.max(np.abs(back[big] / a[big] - 1)) <= 2.0 ** (enc.AREA_SPAN / (2 * 4094)) - 1 <= 0.0021
+
+
+def test_log_areas_keep_a_single_value_exactly():
+    for value in (1.0, 0.25, 3.7):
+        codes, span = enc._encode_log(np.full(5, value), 12)
+        assert np.all(enc._decode_log(codes, 12, span) == value)
+
+
+@pytest.mark.parametrize("bits", [8, 10, 12, 16])
+def test_octahedral_normals_are_within_the_closed_form_bound(bits):
+    """A coordinate error of half a step 1/m (m = 2**(bits-1) - 1) in the
+    unfolded square moves the point on the octahedron by at most sqrt(3)
+    times its length (sqrt(2)/2m), and the octahedron lies at least 1/sqrt(3)
+    from the centre: at most 3 / (sqrt(2) m) radians."""
+    rng = np.random.default_rng(4)
+    v = rng.normal(size=(200000, 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    axes = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1],
+                     [0.6, 0, -0.8], [0, -0.6, -0.8], [-0.6, 0.8, 0]], float)  # fmt: skip
+    v = np.concatenate([v, axes])
+    back = enc._decode_oct(enc._encode_oct(v, bits), bits)
+    angle = np.arccos(np.clip(np.sum(back * v, axis=1), -1, 1))
+    m = 2 ** (bits - 1) - 1
+    assert angle.max() <= 3 / (np.sqrt(2) * m) + 1e-7
+    np.testing.assert_array_equal(back[-9:-3], axes[:6])  # the axes are exact
+
+
+@pytest.mark.parametrize("bits", [8, 10, 12])
+def test_sample_frame_normals_are_within_the_closed_form_bound(bits):
+    """About its sample direction P a normal is the point P + g on the tangent
+    plane; each coordinate of g is off by at most span / 2m, and a point of
+    that plane (at least 1 from the centre) moved by d turns by at most d:
+    span / (sqrt(2) m) radians."""
+    rng = np.random.default_rng(7)
+    dirs = sphere_directions(16)
+    v = rng.normal(size=(100000, 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    nearest = np.argmax(v @ dirs.T, axis=1)  # each normal in its sample direction's cell
+    sample = dirs[nearest]
+    span = enc._frame_span(v, sample)
+    assert span is not None and 0.5 < span < np.tan(np.radians(enc.FRAME_MAX_ANGLE))
+    back = enc._decode_frame(enc._encode_frame(v, sample, bits, span), sample, bits, span)
+    m = 2 ** (bits - 1) - 1
+    angle = np.arccos(np.clip(np.sum(back * v, axis=1), -1, 1))
+    assert angle.max() <= span / (np.sqrt(2) * m) + 1e-9
+    assert angle.max() > 0.3 * span / (np.sqrt(2) * m)  # the bound is not vacuous
+    # normals on their sample directions are exact; one 70 degrees off sends the file octahedral
+    same = enc._decode_frame(enc._encode_frame(sample, sample, bits, 0.0), sample, bits, 0.0)
+    np.testing.assert_allclose(same, sample, atol=1e-15)
+    tilted = np.array([[np.sin(np.radians(70)), 0.0, np.cos(np.radians(70))]])
+    assert enc._frame_span(tilted, np.array([[0.0, 0.0, 1.0]])) is None
+
+
+def test_range_unit_and_centroid_quantisers_are_within_half_a_step():
+    rng = np.random.default_rng(5)
+    x = rng.uniform(0, 2.5, 10000)
+    back = enc._decode_unit(enc._encode_unit(x, 8, 2.5), 8, 2.5)
+    assert np.max(np.abs(back - x)) <= 2.5 / 510 + 1e-12
+    exact = np.arange(256) / 255
+    assert np.array_equal(enc._decode_unit(enc._encode_unit(exact, 8, 1.0), 8, 1.0), exact)
+    # per-row ranges: steps of at most S / (2**bits - 1), S = max(1, largest)
+    # (log2(1 + largest) in log); the ends and constant rows exact
+    rows = np.stack([rng.uniform(0.1, 0.35, 5000), rng.uniform(0.35, 0.7, 5000), np.full(5000, 0.8)])
+    for log, bits, scale in ((False, 8, 1.0), (False, 6, 1.0), (True, 8, 1.0), (False, 8, 40.0), (True, 5, 1e4)):
+        x = rows * scale
+        codes, ranges = enc._encode_range(x, bits, log=log)
+        got = enc._decode_range(codes, bits, ranges, log=log)
+        f = (lambda v: np.log2(1 + v)) if log else (lambda v: v)
+        S = f(x.max()) if log else max(1.0, x.max())
+        assert np.max(np.abs(f(got) - f(x))) <= S / (2 * (2**bits - 1)) * (1 + 1e-9)
+        assert np.array_equal(got.min(axis=1), x.min(axis=1)) and np.array_equal(got.max(axis=1), x.max(axis=1))
+        assert np.all(got[2] == x[2, 0])
+        assert max(r[2] for r in ranges) <= 2**bits - 1 and ranges[2][2] == 0
+    h, origin = 0.37, np.array([-3.0, 2.0, 11.0])
+    coords = rng.integers(0, 50, (1000, 3))
+    cent = origin + (coords + rng.uniform(0, 1, (1000, 3))) * h
+    voxel = np.arange(1000)
+    cent[:3] = origin + (coords[:3] + [[0.0, 0.5, 1.0], [0.5, 0.5, 0.5], [1.0, 0.0, 0.5]]) * h
+    for bits in (2, 4, 8, 12):
+        codes = enc._encode_centroid(cent, origin, h, coords, voxel, bits)
+        got = enc._decode_centroid(codes, origin, h, coords, voxel, bits)
+        assert np.max(np.abs(got - cent)) <= h / (2 * (2**bits - 2)) * (1 + 1e-9)
+        # the voxel's faces and middle plane are exact (axis-aligned surfaces)
+        np.testing.assert_allclose(got[:3], cent[:3], rtol=0, atol=1e-13)
+
+
+def test_facet_density_is_the_entries_projected_area():
+    rng = np.random.default_rng(6)
+    dirs = rng.normal(size=(9, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    offsets = np.array([0, 3, 3, 7, 8])
+    area = rng.uniform(0, 2, 8)
+    normal = rng.normal(size=(8, 3)) * 0.3
+    got = facet_density(area, normal, offsets, dirs)
+    want = np.zeros((4, 9))
+    for v in range(4):
+        for e in range(offsets[v], offsets[v + 1]):
+            want[v] += area[e] * np.abs(dirs @ normal[e])
+    np.testing.assert_allclose(got, want, rtol=1e-14, atol=1e-15)
+
+
+def test_bits_are_checked():
+    bad_bits = (dict(area=1), dict(normal=17), dict(centroid=1), dict(kd=0), dict(density=-1), dict(ks=True),
+                dict(centroid=8.0))  # fmt: skip
+    for bad in bad_bits:
+        with pytest.raises(InputError, match="bits for"):
+            Bits(**bad)
+    assert Bits(density=0).density == 0
+
+
+# ------------------------------------------------------------ a whole texture
+
+
+def angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    a = a / np.maximum(np.linalg.norm(a, axis=1, keepdims=True), 1e-300)
+    b = b / np.maximum(np.linalg.norm(b, axis=1, keepdims=True), 1e-300)
+    return np.arccos(np.clip(np.sum(a * b, axis=1), -1.0, 1.0))
+
+
+def assert_within_bounds(tex: AnisoTexture, got: AnisoTexture, bits: Bits = DEFAULT_BITS) -> None:
+    """Every field of ``got`` (``tex`` through the compact encoding) within its stated bound."""
+    h = tex.voxel_size
+    for name in ("origin", "shape", "coords", "directions", "entry_offsets", "entry_direction"):
+        assert np.array_equal(getattr(got, name), getattr(tex, name)), name
+    for name in ARRAYS:
+        assert getattr(got, name).dtype == getattr(tex, name).dtype, name
+    # areas: half a log2 step relative, or below the span's floor
+    a, a2 = tex.entry_area, got.entry_area
+    step = enc.AREA_SPAN / (2**bits.area - 2)
+    floor = a.max() * 2.0**-enc.AREA_SPAN
+    rel = np.abs(a2 / np.maximum(a, 1e-300) - 1)
+    assert np.all((rel <= 2 ** (step / 2) - 1 + 1e-12) | ((a < floor) & (a2 <= floor * 2 ** (step / 2) * 1.000001)))
+    # normals: direction (octahedral, or about the sample direction with a
+    # span below tan 60 degrees < 3, whichever deflates smaller) and length
+    m, m_oct = 2 ** (bits.normal - 1) - 1, 2 ** (enc.oct_bits(bits) - 1) - 1
+    n, n2 = tex.entry_normal.astype(np.float64), got.entry_normal.astype(np.float64)
+    length = np.linalg.norm(n, axis=1)
+    bound = max(3 / (np.sqrt(2) * m_oct), np.tan(np.radians(enc.FRAME_MAX_ANGLE)) / (np.sqrt(2) * m))
+    assert angle_between(n, n2).max(initial=0) <= bound + 1e-6
+    ell = np.minimum(length, 1)
+    half = 1 / (2 * (2**bits.coherence - 1))
+    assert np.max(np.abs(np.linalg.norm(n2, axis=1) - ell), initial=0) <= half + 1e-6
+    # centroids: h / 2 (2**bits - 2) per axis
+    assert np.max(np.abs(got.entry_centroid - tex.entry_centroid)) <= h / (2 * (2**bits.centroid - 2)) * (1 + 1e-9)
+    # materials: steps of at most S / (2**bits - 1), ends exact
+    for name, log in (("entry_kd", False), ("entry_ks", False), ("entry_shininess", True)):
+        x = getattr(tex, name).astype(np.float64).reshape(len(a), -1)
+        y = getattr(got, name).astype(np.float64).reshape(len(a), -1)
+        if not len(x):
+            continue
+        f = (lambda v: np.log2(1 + v)) if log else (lambda v: v)
+        S = f(x.max()) if log else max(1.0, x.max())
+        half = S / (2 * (2 ** getattr(bits, name.removeprefix("entry_")) - 1))
+        assert np.all(np.abs(f(y) - f(x)) <= half * (1 + 1e-6) + 1e-6), name
+        assert np.array_equal(y.min(axis=0), x.min(axis=0)) and np.array_equal(y.max(axis=0), x.max(axis=0))
+    # density: the residual's half step (of the voxel's area) plus what the
+    # entries' own errors move F by (from the actual differences: a bound
+    # per voxel and sample, not a fit)
+    ev = tex.entry_voxel
+    A_v = np.bincount(ev, weights=a2, minlength=tex.n_voxels)
+    dirs = tex.directions
+    moved = np.abs(a2 - a)[:, None] + a[:, None] * np.abs(
+        np.abs(n2 @ dirs.T) - np.abs(n @ dirs.T)
+    )  # |A'|n'.p| - A|n.p|| <= |A' - A| |n'.p| + A ||n'.p| - |n.p||, |n'| <= 1
+    f_err = np.zeros((tex.n_voxels, len(dirs)))
+    np.add.at(f_err, ev, moved)
+    d_err = np.abs(got.density - tex.density)
+    if bits.density:
+        assert np.all(d_err <= A_v[:, None] / (2 * (2**bits.density - 1)) + f_err + 1e-9)
+    # D >= F always: what the volume renderer's residual reading relies on
+    f2 = facet_density(a2, n2, got.entry_offsets, dirs)
+    assert np.all(got.density >= f2 - 1e-12)
+    assert got.total_area() == pytest.approx(tex.total_area(), rel=2 ** (step / 2) - 1)
+
+
+def test_tree_through_a_file_is_within_every_bound(tree_tex, tree_file):
+    back = AnisoTexture.load(tree_file)
+    f = read_texture_file(tree_file)
+    assert f.version == FORMAT_VERSION == 2 and f.encoding == "compact"
+    # the file holds exactly what as_stored() computes without one
+    ref = tree_tex.as_stored()
+    for name in ARRAYS:
+        a, b = getattr(back, name), getattr(ref, name)
+        assert a.dtype == b.dtype and np.array_equal(a, b), name
+    assert back.meta == tree_tex.meta and back.voxel_size == tree_tex.voxel_size
+    assert_within_bounds(tree_tex, back)
+
+
+@pytest.mark.parametrize("bits", [Bits(), Bits(area=8, normal=10, centroid=6, kd=6, density=4),
+                                  Bits(area=16, normal=16, coherence=16, centroid=16, kd=16, ks=16,
+                                       shininess=16, density=16)])  # fmt: skip
+def test_bounds_hold_at_other_bits(tree_tex, bits):
+    assert_within_bounds(tree_tex, tree_tex.as_stored(bits), bits)
+
+
+def test_more_bits_cost_more_bytes_and_err_less(tree_tex, tmp_path):
+    fine = Bits(area=16, normal=16, centroid=12, kd=12, density=12)
+    sizes = [tree_tex.save(tmp_path / f"{i}.a3d", bits=b).stat().st_size for i, b in enumerate((Bits(), fine))]
+    assert sizes[0] < sizes[1]
+    errs = [np.abs(tree_tex.as_stored(b).entry_centroid - tree_tex.entry_centroid).max() for b in (Bits(), fine)]
+    assert errs[1] < errs[0] / 8
+
+
+def test_derived_density_is_the_facet_density_and_exact_for_flat_entries(tree_tex):
+    got = tree_tex.as_stored(Bits(density=0))
+    f2 = facet_density(got.entry_area, got.entry_normal, got.entry_offsets, got.directions)
+    np.testing.assert_array_equal(got.density, f2)
+    # a quad: one flat facet per voxel, so D = F up to the entries' quantisation
+    quad = build_texture(scenes.quad(), 16, 16)
+    q = quad.as_stored(Bits(density=0))
+    assert np.max(np.abs(q.density - quad.density)) <= 1e-3 * quad.density.max()
+
+
+def test_pyramid_levels_and_dense_voxels_encode(tree_tex):
+    for level in pyramid(tree_tex, max_levels=4):
+        assert_within_bounds(level, level.as_stored())
+    layers = 40
+    quads = [scenes.quad(1.0, (0.0, 0.0, (k + 0.5) / layers - 0.5)) for k in range(layers)]
+    from aniso3d.build.mesh import concatenate
+
+    dense = build_texture(concatenate(quads), 1, 32)
+    assert dense.n_voxels == 1 and dense.density.max() > 30
+    assert_within_bounds(dense, dense.as_stored())
+
+
+def test_materials_above_one_are_kept_and_single_materials_exact(tree_tex):
+    from dataclasses import replace
+
+    tex = replace(tree_tex, entry_kd=tree_tex.entry_kd * 3, entry_ks=tree_tex.entry_ks * 2.5,
+                  entry_shininess=tree_tex.entry_shininess * 50)  # fmt: skip
+    got = tex.as_stored()
+    assert got.entry_kd.max() == tex.entry_kd.max() > 1
+    assert_within_bounds(tex, got)
+    cube = build_texture(scenes.cube(kd=(0.8, 0.3, 0.55), ks=0.25, shininess=33.0), 12, 16)
+    c = cube.as_stored()
+    for name in ("entry_kd", "entry_ks", "entry_shininess"):
+        assert np.array_equal(getattr(c, name), getattr(cube, name)), name
+
+
+def test_empty_texture_round_trips(tmp_path):
+    mesh = Mesh.from_arrays([[0, 0, 0], [1, 1, 1], [2, 2, 2]], [[0, 1, 2]])
+    tex = build_texture(mesh, 4, 8)
+    assert tex.n_voxels == 0
+    back = AnisoTexture.load(tex.save(tmp_path / "e.a3d"))
+    assert back.n_voxels == 0 and back.density.shape == (0, 8) and back.n_entries == 0
+
+
+def test_unencodable_textures_are_refused_and_leave_no_file(tree_tex, tmp_path):
+    from dataclasses import replace
+
+    bad_kd = tree_tex.entry_kd.copy()
+    bad_kd[3, 1] = np.nan
+    cases = [
+        (replace(tree_tex, entry_kd=bad_kd), "entry_kd' holds NaN"),
+        (replace(tree_tex, entry_area=-tree_tex.entry_area), "entry_area' holds negative"),
+        (replace(tree_tex, coords=tree_tex.coords[::-1].copy(), density=tree_tex.density[::-1].copy()), "not sorted"),
+        (replace(tree_tex, entry_direction=tree_tex.entry_direction + 16), "entry_direction lies outside 0..15"),
+    ]
+    for tex, match in cases:
+        with pytest.raises(InputError, match=match):
+            tex.save(tmp_path / "x.a3d")
+        assert list(tmp_path.iterdir()) == []
+    # the exact encoding keeps whatever the arrays hold
+    back = AnisoTexture.load(cases[0][0].save(tmp_path / "x.a3d", encoding="exact"))
+    assert np.isnan(back.entry_kd[3, 1])
+    with pytest.raises(InputError, match="unknown texture encoding 'lossy'"):
+        tree_tex.save(tmp_path / "y.a3d", encoding="lossy")
+
+
+# ------------------------------------------------------------- sizes reported
+
+
+def test_nbytes_is_the_file_size_and_memory_nbytes_the_arrays(tree_tex, tree_file):
+    assert tree_tex.nbytes == tree_file.stat().st_size
+    arrays = [n for n in ARRAYS if n not in ("origin", "shape")]
+    assert tree_tex.memory_nbytes == sum(getattr(tree_tex, n).nbytes for n in arrays)
+    assert tree_tex.nbytes < tree_tex.memory_nbytes / 5
+    pyr = pyramid(tree_tex, max_levels=3)
+    assert pyr.memory_nbytes == sum(t.memory_nbytes for t in pyr) - 2 * tree_tex.directions.nbytes
+
+
+def test_cli_reports_the_stored_texture_bytes(tmp_path, capsys):
+    out = tmp_path / "t.a3d"
+    assert cli_main(["build", "scene:sphere", "-o", str(out), "-r", "10", "-k", "8", "-q"]) == 0
+    rows = {}
+    for line in capsys.readouterr().out.splitlines():
+        key, _, value = re.split(r"(\s{2,})", line.strip(), maxsplit=1)
+        rows[key] = value
+    assert rows["bytes: texture"] == format_bytes(out.stat().st_size)
+
+
+# ---------------------------------------------------------------- file format
+
+
+def test_version_1_file_still_loads():
+    """tests/data/three_triangles_v1.a3d was written by the version 1 writer
+    (before the compact encoding): three triangles, 3^3 voxels, K = 8."""
+    path = DATA / "three_triangles_v1.a3d"
+    f = read_texture_file(path)
+    assert f.version == 1 and f.encoding == "exact"
+    with zipfile.ZipFile(path) as zf:
+        assert json.loads(zf.read("header.json"))["version"] == 1
+        assert all(i.compress_type == zipfile.ZIP_STORED for i in zf.infolist())
+    back = AnisoTexture.load(path)
+    v = np.array([[0, 0, 0], [1, 0.2, 0.1], [0.3, 1, 0.4], [0.9, 0.8, 1.0], [0.1, 0.5, 0.9]], float)
+    faces = np.array([[0, 1, 2], [1, 3, 2], [2, 3, 4]])
+    kd = np.array([[0.8, 0.2, 0.1], [0.1, 0.7, 0.2], [0.5, 0.5, 0.5]])
+    mesh = Mesh.from_arrays(v, faces, kd, np.array([0.1, 0.3, 0.0]), np.array([8.0, 32.0, 1.0]), name="v1-fixture")
+    assert back.total_area() == pytest.approx(mesh.area(), rel=1e-12)
+    ref = build_texture(mesh, 3, 8)
+    for name in ARRAYS:
+        np.testing.assert_allclose(getattr(back, name), getattr(ref, name), rtol=1e-12, atol=1e-14, err_msg=name)
+    assert back.meta["source"] == "v1-fixture"
+
+
+def rewrite(src: Path, dst: Path, header=None, members=None) -> Path:
+    """Copy a texture file, changing header fields and members, and sign it
+    again with a SHA-256 computed here (the digest's definition, twinned):
+    a well-formed file whose checksum holds, so only validation can refuse it."""
+    with zipfile.ZipFile(src) as zin:
+        h = json.loads(zin.read("header.json"))
+        arrays = {}
+        for name in zin.namelist():
+            if name.endswith(".npy"):
+                with zin.open(name) as fh:
+                    arrays[name[:-4]] = np.lib.format.read_array(fh)
+    if header:
+        header(h)
+    if members:
+        members(arrays)
+    sha = hashlib.sha256()
+    for n in sorted(arrays):
+        a = np.ascontiguousarray(arrays[n])
+        sha.update(f"{n}:{a.dtype.str}:{a.shape}".encode())
+        sha.update(a.tobytes())
+    sha.update(json.dumps({"encoding": h["encoding"], "params": h["params"]}, sort_keys=True).encode())
+    h["sha256"] = sha.hexdigest()
+    with zipfile.ZipFile(dst, "w") as zout:
+        zout.writestr("header.json", json.dumps(h))
+        for n, a in arrays.items():
+            buf = io.BytesIO()
+            np.save(buf, a)
+            zout.writestr(n + ".npy", buf.getvalue())
+    return dst
+
+
+def test_resigned_copy_loads_unchanged(tree_file, tmp_path):
+    # the test's own digest agrees with the writer's: the cases below are refused by validation
+    back = AnisoTexture.load(rewrite(tree_file, tmp_path / "same.a3d"))
+    assert np.array_equal(back.density, AnisoTexture.load(tree_file).density)
+
+
+def _set(name, fn):
+    def change(arrays):
+        arrays[name] = fn(arrays[name])
+
+    return change
+
+
+DAMAGED = [
+    ("future version", dict(header=lambda h: h.update(version=3)), "version 3.*Upgrade aniso3d.*aniso3d build"),
+    ("unknown encoding", dict(header=lambda h: h.update(encoding="zstd")), "encoding 'zstd'.*Upgrade aniso3d"),
+    ("params not an object", dict(header=lambda h: h.update(params=[1])), "params is not an object"),
+    ("bits missing", dict(header=lambda h: h["params"].pop("bits")), "encoding parameters are damaged"),
+    ("bits out of range", dict(header=lambda h: h["params"]["bits"].update(area=40)), "bits for 'area'"),
+    ("range not finite", dict(header=lambda h: h["params"]["ranges"].update(ks=[[0, float("inf"), 3]])),
+     "range of ks"),
+    ("ranges short", dict(header=lambda h: h["params"]["ranges"].update(kd=[[0, 1, 3]])), "range of kd"),
+    ("range steps", dict(header=lambda h: h["params"]["ranges"].update(ks=[[0, 1, 300]])), "range of ks"),
+    ("centroid past voxel", dict(members=_set("entry_centroid", lambda a: a | np.uint8(0x3F))), "past the voxel"),
+    ("codes past range", dict(header=lambda h: h["params"]["ranges"]["kd"][0].__setitem__(2, 1)),
+     "codes past its range"),
+    ("coords repeat", dict(members=_set("coords", lambda a: np.concatenate([a, a[:, -1:] * 0], axis=1))),
+     "entry_mask has shape|coords repeat"),
+    ("coords past the grid", dict(members=_set("coords", lambda a: a + np.uint8(200))), "outside the grid"),
+    ("coords planes", dict(members=_set("coords", lambda a: np.concatenate([a, a, a]))), "byte planes"),
+    ("mask shape", dict(members=_set("entry_mask", lambda a: a[:-1])), "entry_mask has shape"),
+    ("area length", dict(members=_set("entry_area", lambda a: a[:, :-1])), "entry_area has shape"),
+    ("area dtype", dict(members=_set("entry_area", lambda a: a.astype(np.int16))), "entry_area has shape .* dtype"),
+    ("codes above bits", dict(members=_set("entry_normal", lambda a: a | np.uint8(0xF0))),
+     "entry_normal holds codes above (9|11) bits"),
+    ("density shape", dict(members=_set("density", lambda a: a[:, :-1])), "density has shape"),
+    ("directions dtype", dict(members=_set("directions", lambda a: a.astype(np.float32))), "directions has shape"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("change, match", [c[1:] for c in DAMAGED], ids=[c[0] for c in DAMAGED])
+def test_damaged_compact_files_are_refused_with_one_clear_error(tree_file, tmp_path, change, match):
+    bad = rewrite(tree_file, tmp_path / "bad.a3d", **change)
+    with pytest.raises(FormatError, match=match) as info:
+        AnisoTexture.load(bad)
+    msg = str(info.value)
+    assert str(bad) in msg and "\n" not in msg
+    assert "rebuild" in msg or "Upgrade" in msg
+
+
+def test_normals_take_the_smaller_of_the_two_maps(tree_tex):
+    """Scattered facets deflate smaller about their sample directions, a smooth
+    sphere on the octahedral map: each file keeps whichever is smaller."""
+    chosen = []
+    for tex in (tree_tex, build_texture(scenes.sphere(), 48, 16)):
+        members, params = enc.encode({n: getattr(tex, n) for n in ARRAYS}, tex.voxel_size)
+        n = tex.entry_normal.astype(np.float64)
+        unit = n / np.linalg.norm(n, axis=1, keepdims=True)
+        sample = tex.directions[tex.entry_direction]
+        span = enc._frame_span(unit, sample)
+        sizes = [enc._deflated(enc._encode_oct(unit, enc.oct_bits(DEFAULT_BITS)), enc.oct_bits(DEFAULT_BITS)),
+                 enc._deflated(enc._encode_frame(unit, sample, DEFAULT_BITS.normal, span), DEFAULT_BITS.normal)]
+        stored = len(zlib.compress(members["entry_normal"].tobytes()))
+        assert stored == min(sizes)
+        chosen.append(params["normal_frame_span"] is not None)
+    assert chosen == [True, False]
+
+
+@pytest.mark.parametrize("bits", [2, 3, 8])
+def test_a_coarse_residual_is_never_worse_than_none(tree_tex, bits):
+    """Rounding the residual r = D - F to the nearest step s stores 0 below
+    s/2 (error r, as without it) and otherwise errs by at most s/2 <= r: at
+    every voxel and sample the density is at least as close as F alone."""
+    d = tree_tex.density
+    f = tree_tex.as_stored(Bits(density=0)).density
+    got = tree_tex.as_stored(Bits(density=bits)).density
+    assert np.all(np.abs(got - d) <= np.abs(f - d) + 1e-12)
+    assert np.any(np.abs(got - d) < np.abs(f - d) - 1e-9)  # and it does store something
