@@ -41,7 +41,7 @@ def register(subparsers) -> None:
     corpus = p.add_argument_group("corpus bench")
     corpus.add_argument("--corpus", action="store_true",
                         help="run every built-in corpus scene at the default texture and write corpus_bench.md, "
-                             ".csv and .json into OUTDIR (512x512; --quick: small images, few frames)")
+                             ".csv and .json into OUTDIR (512x512; --quick: 256x256, few frames)")
     corpus.add_argument("--scenes", type=_scene_list, default=None, metavar="A,B",
                         help="corpus scenes to run (default: all of them)")
     corpus.add_argument("--turntable", type=positive_int, default=None, metavar="N",
