@@ -463,6 +463,7 @@ def run_corpus(
         n_scenes = len(pairs)
     t_start = time.perf_counter()
     load_start = loadavg()
+    version = code_version()  # the code that measures, before anything can change it
     # Texture, two truths, two cameras of renderers, the turntable, done.
     total = max(1, n_scenes * (1 + 2 * (1 + len(RENDERERS)) + 2))
     done = 0
@@ -498,7 +499,7 @@ def run_corpus(
         "view": {"azimuth": VIEW_AZIMUTH, "elevation": VIEW_ELEVATION, "fov": VIEW_FOV},
         "targets": dict(TARGETS),
         "opengl": gl_info,
-        "code": code_version(),
+        "code": version,
         "python": platform.python_version(),
         "machine": platform.machine(),
         "cpu_model": cpu_model(),
