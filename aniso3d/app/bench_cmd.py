@@ -1,4 +1,5 @@
-"""``aniso3d bench``: the speed/size/accuracy sweep (see :mod:`aniso3d.bench`).
+"""``aniso3d bench``: the speed/size/accuracy sweep (see :mod:`aniso3d.bench`),
+and with ``--corpus`` the corpus bench (:mod:`aniso3d.bench.corpus`).
 
 This module owns the command line: it parses the options, loads the input and
 hands the bench a mesh, the settings and a progress bar; the bench itself knows
@@ -8,6 +9,7 @@ nothing of the command line.
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 from pathlib import Path
 
@@ -36,13 +38,78 @@ def register(subparsers) -> None:
     p.add_argument("--no-plots", action="store_true", help="write CSV, JSON and the report only")
     p.add_argument("--backend", default="auto", help="OpenGL backend: auto, egl, osmesa, x11")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+    corpus = p.add_argument_group("corpus bench")
+    corpus.add_argument("--corpus", action="store_true",
+                        help="run every built-in corpus scene at the default texture and write corpus_bench.md, "
+                             ".csv and .json into OUTDIR (512x512; --quick: 256x256, few frames)")
+    corpus.add_argument("--scenes", type=_scene_list, default=None, metavar="A,B",
+                        help="corpus scenes to run (default: all of them)")
+    corpus.add_argument("--turntable", type=positive_int, default=None, metavar="N",
+                        help="turntable frames for the flicker measurement (default: the preset's)")
     p.set_defaults(func=cmd_bench)
+
+
+def _scene_list(text: str) -> tuple[str, ...]:
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    if not names:
+        raise argparse.ArgumentTypeError(f"expected scene names separated by commas, got '{text}'")
+    return names
+
+
+def corpus_command(args: argparse.Namespace) -> str:
+    """The one command line that repeats this corpus run (printed atop its report)."""
+    parts = ["aniso3d", "bench", "--corpus"]
+    if args.quick:
+        parts.append("--quick")
+    if args.size:
+        w, h = args.size
+        parts += ["--size", str(w) if w == h else f"{w}x{h}"]
+    for flag, value in (("--frames", args.frames), ("--gt-ssaa", args.gt_ssaa), ("--turntable", args.turntable)):
+        if value:
+            parts += [flag, str(value)]
+    if args.scenes:
+        parts += ["--scenes", ",".join(args.scenes)]
+    if args.no_flip:
+        parts.append("--no-flip")
+    if args.backend != "auto":
+        parts += ["--backend", args.backend]
+    return shlex.join([*parts, "-o", str(args.output)])
+
+
+def cmd_corpus(args: argparse.Namespace) -> int:
+    from aniso3d.bench.corpus import corpus_settings, run_corpus
+    from aniso3d.bench.corpus_report import write_corpus
+
+    if args.smoke:
+        raise InputError("--corpus takes --quick or the full preset, not --smoke")
+    if args.mesh:
+        raise InputError(f"--corpus runs the built-in scenes, not '{args.mesh}'; choose them with --scenes")
+    settings = corpus_settings("quick" if args.quick else "full", size=args.size, frames=args.frames,
+                               gt_ssaa=args.gt_ssaa, turntable=args.turntable, scene_names=args.scenes)
+    outdir = Path(args.output)
+    if outdir.exists() and not outdir.is_dir():
+        raise InputError(f"output '{outdir}' is a file; the corpus bench writes into a folder")
+    progress = Progress(f"corpus {settings.name}", enabled=False if args.quiet else None)
+    result = run_corpus(settings, progress=progress, with_flip=False if args.no_flip else None,
+                        backend=args.backend)
+    for path in write_corpus(result, outdir, corpus_command(args)):
+        print(f"wrote {path}")
+    for s in result.scenes:
+        verdicts = " ".join(f"{t}={'pass' if v else 'n/a' if v is None else 'FAIL'}" for t, v in s["targets"].items())
+        print(f"{s['scene']}: {verdicts}")
+    for r in result.failed:
+        print(f"failed: {r['scene']} {r['camera']} {r['renderer']}: {r['reason']}", file=sys.stderr)
+    return 1 if result.failed else 0
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
     from aniso3d.bench import label, preset_settings, run_bench, write_outputs
     from aniso3d.build.mesh import Mesh
 
+    if args.corpus:
+        return cmd_corpus(args)
+    if args.scenes or args.turntable:
+        raise InputError("--scenes and --turntable apply to the corpus bench; add --corpus")
     preset = "smoke" if args.smoke else "quick" if args.quick else "full"
     settings = preset_settings(preset, size=args.size, frames=args.frames, gt_ssaa=args.gt_ssaa)
     outdir = Path(args.output)
@@ -75,4 +142,4 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 1 if result.failed else 0
 
 
-__all__ = ["cmd_bench", "register"]
+__all__ = ["cmd_bench", "cmd_corpus", "corpus_command", "register"]

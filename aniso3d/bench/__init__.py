@@ -18,6 +18,12 @@ The modules follow one run from settings to report:
 - :mod:`~aniso3d.bench.report`: the Markdown report, one function per section;
 - :mod:`~aniso3d.bench.outputs`: CSV, JSON and writing everything.
 
+Beside the sweep, the corpus bench (``aniso3d bench --corpus``) runs every
+built-in scene at the default texture and checks the method's targets per scene:
+
+- :mod:`~aniso3d.bench.corpus`: settings, cameras, flicker, targets, the run;
+- :mod:`~aniso3d.bench.corpus_report`: corpus_bench.md, .csv and .json.
+
 The command line (``aniso3d/app/bench_cmd.py``) loads the input and calls
 :func:`run_bench` and :func:`write_outputs`.
 """
@@ -26,6 +32,8 @@ from __future__ import annotations
 
 from aniso3d.bench.analyse import in_block, label, mark_pareto, pareto_front, recommend
 from aniso3d.bench.cameras import CameraSpec, crop_box, make_cameras, near_far, pixels_per_unit
+from aniso3d.bench.corpus import CorpusResult, CorpusSettings, corpus_settings, run_corpus
+from aniso3d.bench.corpus_report import write_corpus
 from aniso3d.bench.outputs import columns_of, to_csv, to_json, write_outputs
 from aniso3d.bench.plan import Case, plan_cases, splat_case, volume_case
 from aniso3d.bench.plots import PLOTS, matplotlib_available
@@ -35,9 +43,9 @@ from aniso3d.bench.settings import AXES, PRESETS, RENDERERS, SPLAT_AXES, Setting
 
 __all__ = [
     "AXES", "COLOUR_SPACE", "COLUMNS", "PLOTS", "PRESETS", "RENDERERS", "SPLAT_AXES",
-    "BenchResult", "CameraSpec", "Case", "Settings",
-    "blank_row", "classify_failure", "columns_of", "crop_box", "in_block", "label", "make_cameras",
-    "make_report", "mark_pareto", "matplotlib_available", "near_far", "pareto_front", "pixels_per_unit",
-    "plan_cases", "preset_settings", "recommend", "run_bench", "splat_case", "to_csv", "to_json",
-    "volume_case", "write_outputs",
+    "BenchResult", "CameraSpec", "Case", "CorpusResult", "CorpusSettings", "Settings",
+    "blank_row", "classify_failure", "columns_of", "corpus_settings", "crop_box", "in_block", "label",
+    "make_cameras", "make_report", "mark_pareto", "matplotlib_available", "near_far", "pareto_front",
+    "pixels_per_unit", "plan_cases", "preset_settings", "recommend", "run_bench", "run_corpus", "splat_case",
+    "to_csv", "to_json", "volume_case", "write_corpus", "write_outputs",
 ]  # fmt: skip

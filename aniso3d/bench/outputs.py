@@ -18,7 +18,7 @@ from aniso3d.files import atomic_write, refuse_overwriting_input
 from aniso3d.metrics import FLIP_MISSING
 
 
-def _cell(v) -> str:
+def cell(v) -> str:
     if v is None:
         return ""
     if isinstance(v, bool):
@@ -30,7 +30,7 @@ def _cell(v) -> str:
             return "inf" if v > 0 else "-inf"
         return f"{v:.6g}"
     if isinstance(v, np.generic):
-        return _cell(v.item())
+        return cell(v.item())
     return str(v)
 
 
@@ -47,15 +47,15 @@ def to_csv(rows: list[dict]) -> bytes:
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(cols)
     for r in rows:
-        w.writerow([_cell(r.get(c)) for c in cols])
+        w.writerow([cell(r.get(c)) for c in cols])
     return buf.getvalue().encode("utf-8")
 
 
-def _jsonable(v):
+def jsonable(v):
     if isinstance(v, dict):
-        return {str(k): _jsonable(x) for k, x in v.items()}
+        return {str(k): jsonable(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
-        return [_jsonable(x) for x in v]
+        return [jsonable(x) for x in v]
     if isinstance(v, np.generic):
         v = v.item()
     if isinstance(v, float) and not math.isfinite(v):
@@ -67,7 +67,7 @@ def to_json(result: BenchResult) -> bytes:
     """``{"meta": ..., "columns": [...], "rows": [...]}``; unmeasured and
     infinite values (PSNR of an identical image) are null."""
     doc = {"meta": result.meta, "columns": columns_of(result.rows), "rows": result.rows}
-    return (json.dumps(_jsonable(doc), indent=1, allow_nan=False) + "\n").encode("utf-8")
+    return (json.dumps(jsonable(doc), indent=1, allow_nan=False) + "\n").encode("utf-8")
 
 
 def write_outputs(

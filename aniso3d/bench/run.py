@@ -25,6 +25,7 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
@@ -125,7 +126,19 @@ def cpu_model() -> str | None:
     return platform.processor() or None
 
 
-def measure(renderer: Renderer, thing, case: Case, cam: CameraSpec, settings: Settings) -> tuple[np.ndarray, dict]:
+class FrameCounts(Protocol):
+    """How :func:`measure` times a case (:class:`Settings` is one): ``warmup``
+    untimed frames, then up to ``frames`` timed ones, stopping after
+    ``frame_budget`` seconds."""
+
+    warmup: int
+    frames: int
+    frame_budget: float
+
+
+def measure(
+    renderer: Renderer, thing, case: Case, cam: CameraSpec, settings: FrameCounts
+) -> tuple[np.ndarray, dict]:
     """Render ``case`` (warm-up first, its RGBA image kept), then time frames.
 
     Returns the warm-up image (uint8, h x w x 4) and the timing columns: GL
@@ -187,6 +200,36 @@ def downfilter_cpu(size: tuple[int, int], ssaa: int, repeats: int = 3) -> float:
     return float(np.median(times))
 
 
+def truth_ssaa(gl: GLContext, size: tuple[int, int], want: int) -> int:
+    """The ground truth's samples per pixel along each axis: ``want``, halved
+    while the supersampled framebuffer would exceed this OpenGL's limit (at
+    least 2; raises InputError when even 2 does not fit)."""
+    limit = min(gl.max_texture_size, *gl.max_viewport)
+    ssaa = want
+    while ssaa > 2 and max(size) * ssaa > limit:
+        ssaa //= 2
+    if max(size) * ssaa > limit:
+        raise InputError(
+            f"this OpenGL's framebuffer limit ({limit} px) is too small for a supersampled "
+            f"ground truth at {size[0]}x{size[1]}; use a smaller --size"
+        )
+    return ssaa
+
+
+def score(truth: np.ndarray, img: np.ndarray, crop: tuple[int, int, int, int], with_flip: bool) -> dict:
+    """PSNR, SSIM and FLIP (NaN without it) of ``img`` against ``truth``
+    (both RGBA uint8, h x w x 4) inside ``crop`` (x0, y0, x1, y1), and the
+    ``coverage``: the covered area (alpha) over the truth's, above 1 when the
+    rendering claims more of the background than the polygons do."""
+    x0, y0, x1, y1 = crop
+    ref, test = truth[y0:y1, x0:x1, :3], img[y0:y1, x0:x1, :3]
+    out = metrics.compare(ref, test, with_flip=with_flip)
+    gt_alpha = float(truth[y0:y1, x0:x1, 3].sum(dtype=np.float64))
+    alpha = float(img[y0:y1, x0:x1, 3].sum(dtype=np.float64))
+    out["coverage"] = alpha / gt_alpha if gt_alpha > 0 else math.nan
+    return out
+
+
 def blank_row(case: Case, blocks: list[str], cam: CameraSpec, settings: Settings, mesh: Mesh) -> dict:
     """A row for ``case`` with everything known before measuring filled in."""
     row = {c: None for c in COLUMNS}
@@ -235,15 +278,7 @@ class _Sweep:
     def ground_truth(self, gl: GLContext, renderer: Renderer) -> None:
         """The supersampled polygon image of every camera (the largest
         supersampling this OpenGL's framebuffer limit allows, at least 2)."""
-        size = self.settings.size
-        limit = min(gl.max_texture_size, *gl.max_viewport)
-        while self.gt_ssaa > 2 and max(size) * self.gt_ssaa > limit:
-            self.gt_ssaa //= 2
-        if max(size) * self.gt_ssaa > limit:
-            raise InputError(
-                f"this OpenGL's framebuffer limit ({limit} px) is too small for a supersampled "
-                f"ground truth at {size[0]}x{size[1]}; use a smaller --size"
-            )
+        self.gt_ssaa = truth_ssaa(gl, self.settings.size, self.gt_ssaa)
         for cam in self.cameras:
             t0 = time.perf_counter()
             self.truth[cam.label] = renderer.render(self.mesh, cam.camera, "mesh", ssaa=self.gt_ssaa, alpha=True)
@@ -264,15 +299,9 @@ class _Sweep:
             load = loadavg()
             row["load_1min"] = load[0] if load else None
         row.update(timing)
+        row.update(score(self.truth[cam.label], img, cam.crop, self.with_flip))
         x0, y0, x1, y1 = cam.crop
-        truth = self.truth[cam.label]
-        ref, test = truth[y0:y1, x0:x1, :3], img[y0:y1, x0:x1, :3]
-        row.update(metrics.compare(ref, test, with_flip=self.with_flip))
-        # Covered area (alpha) against the ground truth's: above 1 means the
-        # rendering claims more of the background than the polygons do.
-        gt_alpha = float(truth[y0:y1, x0:x1, 3].sum(dtype=np.float64))
-        alpha = float(img[y0:y1, x0:x1, 3].sum(dtype=np.float64))
-        row["coverage"] = alpha / gt_alpha if gt_alpha > 0 else math.nan
+        test = img[y0:y1, x0:x1, :3]
         row["error"] = row["flip"] if self.with_flip else 1.0 - row["ssim"]
         if "grid" in row["blocks"].split(";"):
             self.images[cam.label][case.renderer] = test
