@@ -1,9 +1,11 @@
 """Anti-aliased (coverage-aware) splats against the other renderers, near to far.
 
-The default tree (``aniso3d.scenes.tree()``) -> ``build_texture(mesh, 128, 64)``
+The default tree (``aniso3d.scenes.tree()``; ``--scene NAME`` for another of
+``aniso3d.scenes.CORPUS`` at its defaults) -> ``build_texture(mesh, 128, 64)``
 -> ``to_points()``, drawn at 512x512 from ``Camera.fit(bounds, direction=...,
 aspect=1, distance_scale=s)`` (azimuth 30, elevation 15 degrees, the bench's
-view) for s = 1, 2.3, 4.6, 9 and 18, by:
+view) for s = 1, 2.3, 4.6, 9 and 18 (``--scales``; ``--voxel-px 1`` instead
+puts the camera where a voxel covers one pixel), by:
 
 - the polygons at 1 and 2x2 samples per pixel;
 - the volume renderer, single level and with ``lod=True``;
@@ -24,12 +26,18 @@ select, draw, read back; the 2x2 polygons' down-filtering on the CPU is not
 in it) and this process's CPU time over all threads (steadier when other
 work shares the machine).
 
+``--configs`` keeps only the renderers whose names start with one of the
+given prefixes (``--configs "splat high"``).
+
 The table goes to stdout and, with ``--md``, between the markers
 ``<!-- bench_splat_aa:begin -->`` and ``<!-- bench_splat_aa:end -->`` of that
-Markdown file (created if missing), so the prose around them is kept.
+Markdown file (created if missing), so the prose around them is kept;
+``--marker NAME`` uses ``<!-- NAME:begin -->`` and ``<!-- NAME:end -->``
+instead (so several runs fit one file).
 
     .venv/bin/python demos/bench_splat_aa.py [--size 512] [--frames 5] \\
-        [--md docs/splat_aa.md] [--images /tmp/splat_aa]
+        [--scene tree] [--scales 1,2.3] [--voxel-px 1] [--configs "splat high"] \\
+        [--md docs/splat_aa.md] [--marker bench_splat_aa] [--images /tmp/splat_aa]
 """
 
 from __future__ import annotations
@@ -50,7 +58,6 @@ from aniso3d.rendering.camera import Camera
 from aniso3d.rendering.images import save_png
 from aniso3d.rendering.renderer import Renderer
 
-BEGIN, END = "<!-- bench_splat_aa:begin -->", "<!-- bench_splat_aa:end -->"
 SCALES = (1.0, 2.3, 4.6, 9.0, 18.0)
 AZIMUTH, ELEVATION = 30.0, 15.0
 
@@ -88,23 +95,43 @@ def main() -> None:
     ap.add_argument("--resolution", type=int, default=128)
     ap.add_argument("--directions", type=int, default=64)
     ap.add_argument("--gt-ssaa", type=int, default=8)
+    ap.add_argument("--scene", default="tree", choices=aniso3d.scenes.CORPUS)
+    ap.add_argument("--scales", default=",".join(f"{x:g}" for x in SCALES),
+                    help="distance scales s, comma-separated")  # fmt: skip
+    ap.add_argument("--voxel-px", type=float, default=0.0,
+                    help="instead of --scales: one camera where a voxel covers this many pixels")  # fmt: skip
+    ap.add_argument("--configs", default="", help="comma-separated name prefixes of the renderers to run")
     ap.add_argument("--md", default="", help="Markdown file to write the table into")
+    ap.add_argument("--marker", default="bench_splat_aa", help="name of the Markdown markers")
     ap.add_argument("--images", default="", help="folder to save the images to (optional)")
     args = ap.parse_args()
 
     started = time.time()
     load0 = os.getloadavg()[0]
-    mesh = aniso3d.scenes.tree()
+    begin, end = f"<!-- {args.marker}:begin -->", f"<!-- {args.marker}:end -->"
+    prefixes = [c.strip() for c in args.configs.split(",") if c.strip()]
+    configs = [c for c in CONFIGS if not prefixes or any(c[0].startswith(x) for x in prefixes)]
+    mesh = aniso3d.scenes.get_scene(args.scene)
+    scene = "the default tree" if args.scene == "tree" else f"scene {args.scene} (defaults)"
     t = time.perf_counter()
     tex = aniso3d.build_texture(mesh, args.resolution, args.directions)
     points = tex.to_points()
     build_s = time.perf_counter() - t
-    print(f"tree: {mesh.n_faces:,} triangles -> {tex.n_voxels:,} voxels, "
+    print(f"{args.scene}: {mesh.n_faces:,} triangles -> {tex.n_voxels:,} voxels, "
           f"{len(points):,} points in {build_s:.1f} s")  # fmt: skip
     with_flip = flip_available()
     size = (args.size, args.size)
+
+    def voxel_pixels(cam: Camera) -> float:
+        dist = float(np.linalg.norm(np.subtract(cam.position, cam.target)))
+        return tex.voxel_size * size[1] / (2.0 * dist * math.tan(math.radians(cam.fov) / 2.0))
+
+    scales = [float(x) for x in args.scales.split(",")]
+    if args.voxel_px > 0:
+        near = Camera.fit(mesh.bounds, direction=direction(), aspect=1.0)
+        scales = [round(voxel_pixels(near) / args.voxel_px, 2)]
     cams = [Camera.fit(mesh.bounds, direction=direction(), aspect=1.0, distance_scale=s)
-            for s in SCALES]  # fmt: skip
+            for s in scales]  # fmt: skip
 
     def thing_for(method: str, opts: dict):
         if method == "mesh":
@@ -125,13 +152,10 @@ def main() -> None:
             truths.append(gt[..., :3])
             truth_alpha.append(gt[..., 3].astype(np.float64) / 255.0)
             boxes.append(crop_box(cam, mesh.bounds, size, margin=8))
-            dist = float(np.linalg.norm(np.subtract(cam.position, cam.target)))
-            voxel_px.append(
-                tex.voxel_size * size[1] / (2.0 * dist * math.tan(math.radians(cam.fov) / 2.0))
-            )
-            print(f"s={SCALES[len(truths) - 1]:g}: truth in {time.perf_counter() - t:.1f} s")
+            voxel_px.append(voxel_pixels(cam))
+            print(f"s={scales[len(truths) - 1]:g}: truth in {time.perf_counter() - t:.1f} s")
         # Warm-up: uploads, pyramids, programs.
-        for _, method, opts in CONFIGS:
+        for _, method, opts in configs:
             for cam in cams:
                 r.render(thing_for(method, opts), cam, method, **opts)
         walls: dict[tuple[int, str], list[float]] = {}
@@ -139,7 +163,7 @@ def main() -> None:
         stats: dict[tuple[int, str], dict | None] = {}
         for rnd in range(args.frames + 1):
             for i, cam in enumerate(cams):
-                for name, method, opts in CONFIGS:
+                for name, method, opts in configs:
                     c = time.process_time()
                     img = r.render(thing_for(method, opts), cam, method, alpha=True, **opts)
                     c = time.process_time() - c
@@ -155,7 +179,7 @@ def main() -> None:
                             "coverage": a.sum() / max(truth_alpha[i][y0:y1, x0:x1].sum(), 1e-9),
                         }
                         stats[key] = r.last_lod_stats
-                        images[f"s{SCALES[i]:g}_{name.split(' (')[0].replace(' ', '_')}"] = (
+                        images[f"s{scales[i]:g}_{name.split(' (')[0].replace(' ', '_')}"] = (
                             np.ascontiguousarray(img[y0:y1, x0:x1, :3])
                         )
                         continue
@@ -165,7 +189,7 @@ def main() -> None:
                 print("scored; timing ...")
         for i in range(len(cams)):
             x0, y0, x1, y1 = boxes[i]
-            images[f"s{SCALES[i]:g}_truth"] = np.ascontiguousarray(truths[i][y0:y1, x0:x1])
+            images[f"s{scales[i]:g}_truth"] = np.ascontiguousarray(truths[i][y0:y1, x0:x1])
 
     load1 = os.getloadavg()[0]
     minutes = (time.time() - started) / 60
@@ -177,34 +201,38 @@ def main() -> None:
             return f"{st['points']:,} pts"
         return f"level {st['level']}" if "level" in st else ""
 
+    def ms(times: list[float] | None) -> str:
+        return f"{1e3 * np.median(times):.0f}" if times else "–"
+
     rows = []
-    for i, s in enumerate(SCALES):
-        for name, _, _ in CONFIGS:
+    for i, s in enumerate(scales):
+        for name, _, _ in configs:
             res = results[(i, name)]
             rows.append([
                 f"{s:g}", f"{voxel_px[i]:.2f}", name, drawn(stats[(i, name)]),
                 f"{res['psnr']:.2f}", f"{res['ssim']:.4f}",
                 "–" if math.isnan(res["flip"]) else f"{res['flip']:.4f}",
                 f"{res['coverage']:.2f}",
-                f"{1e3 * np.median(walls[(i, name)]):.0f}",
-                f"{1e3 * np.median(cpus[(i, name)]):.0f}",
+                ms(walls.get((i, name))), ms(cpus.get((i, name))),
             ])  # fmt: skip
     # Means over the cameras where a voxel covers a pixel or less.
-    minified = [i for i in range(len(SCALES)) if voxel_px[i] <= 1.05]
+    minified = [i for i in range(len(scales)) if voxel_px[i] <= 1.05]
     mean_rows = []
-    for config in CONFIGS:
+    for config in configs if minified else ():
         name = config[0]
 
         def mean(field, name=name):
             return float(np.mean([results[(i, name)][field] for i in minified]))
 
         def mean_ms(table, name=name):
-            return 1e3 * float(np.mean([np.median(table[(i, name)]) for i in minified]))
+            if not args.frames:
+                return "–"
+            return f"{1e3 * float(np.mean([np.median(table[(i, name)]) for i in minified])):.0f}"
 
         mean_rows.append([
             name, f"{mean('psnr'):.2f}", f"{mean('ssim'):.4f}",
             "–" if not with_flip else f"{mean('flip'):.4f}", f"{mean('coverage'):.2f}",
-            f"{mean_ms(walls):.0f}", f"{mean_ms(cpus):.0f}",
+            mean_ms(walls), mean_ms(cpus),
         ])  # fmt: skip
 
     busy = (
@@ -213,15 +241,16 @@ def main() -> None:
         "column counts this process's work over all rasteriser threads."
     )
     parts = [
-        BEGIN,
+        begin,
         f"Run {time.strftime('%Y-%m-%d %H:%M')} in {minutes:.1f} min on {gl_name}, "
         f"{platform.machine()}; `demos/bench_splat_aa.py --size {args.size} --frames "
-        f"{args.frames}`. Scene: the default tree, {mesh.n_faces:,} triangles, "
+        f"{args.frames} --scene {args.scene} --scales {','.join(f'{x:g}' for x in scales)}"
+        f"{' --configs ' + repr(args.configs) if prefixes else ''}`. Scene: {scene}, {mesh.n_faces:,} triangles, "
         f"{args.resolution}^3 voxels ({tex.n_voxels:,}), K = {args.directions}, "
         f"{len(points):,} points. Images {size[0]}x{size[1]}, camera `Camera.fit(bounds, "
         f"direction=(azimuth {AZIMUTH:g}, elevation {ELEVATION:g}), aspect=1, "
         f"distance_scale=s)`; square splats. Errors against the polygons at "
-        f"{args.gt_ssaa}x{args.gt_ssaa} samples per pixel inside the tree's projected box + "
+        f"{args.gt_ssaa}x{args.gt_ssaa} samples per pixel inside the object's projected box + "
         f"8 px; coverage: summed alpha over the truth's there. Frame ms: median of "
         f"{args.frames} after a warm-up, interleaved, draw + read back (LOD: with the "
         f"selection). {busy}",
@@ -241,22 +270,23 @@ def main() -> None:
             ],
             rows,
         ),  # fmt: skip
-        "",
-        f"**Mean over the {len(minified)} cameras where a voxel covers a pixel or less** "
-        f"(s = {', '.join(f'{SCALES[i]:g}' for i in minified)}):",
-        "",
-        md_table(
-            ["renderer", "PSNR dB", "SSIM", "FLIP", "coverage", "wall ms", "cpu ms"], mean_rows
-        ),  # fmt: skip
-        END,
     ]
+    if len(minified) > 1:
+        parts += [
+            "",
+            f"**Mean over the {len(minified)} cameras where a voxel covers a pixel or less** "
+            f"(s = {', '.join(f'{scales[i]:g}' for i in minified)}):",
+            "",
+            md_table(["renderer", "PSNR dB", "SSIM", "FLIP", "coverage", "wall ms", "cpu ms"], mean_rows),
+        ]
+    parts.append(end)
     block = "\n".join(parts)
     print("\n" + block)
     if args.md:
         path = Path(args.md)
         text = path.read_text() if path.exists() else "# Anti-aliased splats\n\n"
-        if BEGIN in text and END in text:
-            text = text[: text.index(BEGIN)] + block + text[text.index(END) + len(END) :]
+        if begin in text and end in text:
+            text = text[: text.index(begin)] + block + text[text.index(end) + len(end) :]
         else:
             text = text.rstrip("\n") + "\n\n" + block + "\n"
         path.write_text(text)

@@ -43,12 +43,16 @@ pixel holding a splat's projected centre is always drawn).
 from __future__ import annotations
 
 import moderngl
+import numpy as np
 
 from aniso3d.rendering.frame import FrameView
 from aniso3d.rendering.splat.buffers import GPUPoints
 from aniso3d.rendering.splat.options import SplatOptions
-from aniso3d.rendering.splat.params import AA_DEEP, AA_DTYPE, AA_SLABS, ACCUM_DTYPE
+from aniso3d.rendering.splat.params import AA_DTYPE, AA_LAYERS, AA_SLICES, ACCUM_DTYPE
 from aniso3d.rendering.splat.pipeline import SplatPipeline, Targets
+
+#: Image unit the occupancy mask of quality "high" is bound to.
+MASK_UNIT = 0
 
 
 def visible_then_accumulate(
@@ -108,7 +112,8 @@ class BlendPass:
 
 
 class HighPass:
-    """Visibility, accumulation into depth layers, compositing
+    """Visibility with the occupancy mask, the runs pass
+    (``splat_runs.frag``), accumulation into layers, compositing
     (``splat_aa_resolve.frag``)."""
 
     quality = "high"
@@ -117,34 +122,63 @@ class HighPass:
         self.pipe = pipe
 
     def targets(self, size: tuple[int, int]) -> Targets:
-        """The shared targets plus the layers and their framebuffer."""
+        """The shared targets plus the mask, the runs and the layers."""
         tg = self.pipe.targets(size)
-        if len(tg.slabs) != AA_SLABS + 1:
+        words = AA_SLICES // 32
+        if tg.mask is None or tg.mask.layers != words or len(tg.layers) != AA_LAYERS:
             gl = self.pipe.gl
-            gl.free(tg.layered, *tg.slabs)
-            deep = min(4, max(1, AA_SLABS - AA_DEEP))  # channels of the resolved parts
-            tg.slabs = tuple(
-                gl.track(gl.ctx.texture(size, 4 if i < AA_SLABS else deep, dtype=AA_DTYPE))
-                for i in range(AA_SLABS + 1)
-            )
-            for tex in tg.slabs:
+            gl.free(tg.layered, tg.runs_fbo, tg.mask, tg.runs, *tg.layers)
+            # Cleared once here; the runs pass clears what each draw marked.
+            tg.mask = gl.track(gl.ctx.texture_array((*size, words), 1, np.zeros(size[0] * size[1] * words, "u4"),
+                                                    dtype="u4"))  # fmt: skip
+            tg.runs = gl.track(gl.ctx.texture(size, 4, dtype="u4"))
+            tg.layers = tuple(gl.track(gl.ctx.texture(size, 4, dtype=AA_DTYPE)) for _ in range(AA_LAYERS))
+            for tex in (tg.mask, tg.runs, *tg.layers):
                 tex.filter = moderngl.NEAREST, moderngl.NEAREST
-            tg.layered = gl.track(gl.ctx.framebuffer(color_attachments=list(tg.slabs)))
+            # The visibility depth too, to run the runs pass only where something was drawn.
+            tg.runs_fbo = gl.track(gl.ctx.framebuffer(color_attachments=[tg.runs], depth_attachment=tg.depth))
+            tg.layered = gl.track(gl.ctx.framebuffer(color_attachments=list(tg.layers)))
         return tg
 
     def draw(
         self, handle: GPUPoints, view: FrameView, opts: SplatOptions, uniforms: dict, tg: Targets,
         target, viewport,
     ) -> None:  # fmt: skip
-        """The three passes, the last composited onto ``target`` with ``viewport``."""
+        """The four passes, the last composited onto ``target`` with ``viewport``."""
         pipe = self.pipe
-        visible_then_accumulate(pipe, handle, view, opts, uniforms, tg, tg.layered)
-        textures = {"u_visible": tg.depth, "u_resolved": tg.slabs[-1]}
-        for i, tex in enumerate(tg.slabs[:-1]):
-            textures[f"u_slab[{i}]"] = tex
+        ctx = pipe.gl.ctx
+        # Visibility: the pushed nearest depth, and the occupancy mask.
+        tg.visibility.use()
+        tg.visibility.clear(depth=1.0)
+        tg.mask.bind_to_image(MASK_UNIT, read=True, write=True)
+        pipe.splats(handle, view, opts, "visibility", {**uniforms, "u_mask": MASK_UNIT})
+        ctx.memory_barrier(moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
+        # Runs: where each pixel's surfaces start; clears the mask.
+        tg.runs_fbo.use()
+        tg.runs_fbo.depth_mask = False
+        ctx.depth_func = ">"
+        prog, vao = pipe.screen("splat_runs.frag", aa=True, far=True)
+        pipe.bind(prog, {"u_mask": MASK_UNIT, "u_span": uniforms["u_span"]})
+        vao.render(moderngl.TRIANGLES, vertices=3)
+        ctx.depth_func = "<"
+        ctx.disable(moderngl.DEPTH_TEST)
+        ctx.memory_barrier(moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
+        # Accumulation into the layers.
+        tg.layered.use()
+        tg.layered.clear(0.0, 0.0, 0.0, 0.0)
+        ctx.enable(moderngl.BLEND)
+        ctx.blend_equation = moderngl.FUNC_ADD
+        ctx.blend_func = moderngl.ONE, moderngl.ONE
+        tg.runs.use(location=0)
+        pipe.splats(handle, view, opts, "accumulate", {**uniforms, "u_runs": 0})
+        ctx.disable(moderngl.BLEND)
+        ctx.enable(moderngl.DEPTH_TEST)
+        textures = {"u_visible": tg.depth, "u_runs": tg.runs}
+        for i, tex in enumerate(tg.layers):
+            textures[f"u_layer[{i}]"] = tex
         prog, vao = pipe.resolve("splat_aa_resolve.frag", textures, uniforms, target, viewport, aa=True)
-        units = [uniforms.pop(f"u_slab[{i}]") for i in range(len(tg.slabs) - 1)]
-        uniforms["u_slab"] = units if len(units) > 1 else units[0]
+        units = [uniforms.pop(f"u_layer[{i}]") for i in range(len(tg.layers))]
+        uniforms["u_layer"] = units if len(units) > 1 else units[0]
         self.composite(prog, vao, uniforms, target)
 
     def composite(self, prog, vao, uniforms: dict, target) -> None:
