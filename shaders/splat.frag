@@ -38,29 +38,27 @@
 // Fragments with c < MIN_COVERAGE are dropped in both passes. A fragment's
 // depth z is linear, (t - near) / (far - near) (a surface may be far thinner
 // than a step of window depth far away), the plane's where the pixel's ray
-// meets it, else the centre's, clamped to the bounding sphere (zrange); its
-// tolerance is SplatData.push (u_push times its larger half-axis) along the
-// view axis. Surfaces are found per pixel from the depths of its fragments
-// (see aniso3d/rendering/splat/reference.py, the NumPy twin, for the rule):
+// meets it, else the centre's, clamped to zrange (the bounding sphere grown
+// by a few pixels: see splat.vert). The pixel's fragments are grouped into
+// surfaces by depth (aniso3d/rendering/splat/reference.py, the NumPy twin,
+// states the rule):
 //   PASS 1 writes the pushed depth z + push (the visible depth, kept for
-//     compositing with other draws), and marks the depth slices
-//     [z - push, z + push] covers in the pixel's occupancy mask u_mask
-//     (SLICES slices over the cloud's depth range, u_slices; at least the
-//     fragment's own slice), by atomic OR: a run of marked slices is one
-//     surface, fragments within each other's tolerance chained;
-//     splat_runs.frag then writes where the runs start (u_runs);
-//   PASS 2 adds (RGB c, c) to the layer of the fragment's run: layer k holds
-//     the k-th surface from the front, the last (LAYERS - 1) every surface
-//     from there on. A splat whose box is wider than u_shade_box pixels is
-//     shaded per fragment in layer 0 (in the geometry path, which
-//     aniso3d/rendering/splat sends those splats through); any other fragment
-//     takes its splat's colour shaded once at the centre (SplatData.rgb).
-//     splat_aa_resolve.frag composites the layers.
+//     compositing with other draws) and sets the bit of z's slice in the
+//     pixel's occupancy mask u_mask (SLICES slices over the cloud's depths,
+//     u_slices) by atomic OR; splat_surfaces.frag then finds where the
+//     pixel's surfaces start (u_surfaces);
+//   PASS 2 adds (RGB c, c) to the layer of the fragment's surface: layer k
+//     holds the k-th surface from the front, the last (LAYERS - 1) every
+//     surface from there on. A splat whose box is wider than u_shade_box
+//     pixels is shaded per fragment in layer 0 (in the geometry path, which
+//     aniso3d/rendering/splat sends those splats through); any other
+//     fragment takes its splat's colour shaded once at the centre
+//     (SplatData.rgb). splat_aa_resolve.frag composites the layers.
 #include "lighting.glsl"
 #ifdef AA
 #include "splat_filter.glsl"
 #ifndef LAYERS
-#define LAYERS 5
+#define LAYERS 4
 #endif
 #ifndef SLICES
 #define SLICES 512
@@ -91,7 +89,7 @@ layout(r32ui) uniform uimage2DArray u_mask;  // SLICES / 32 words per pixel
 #if PASS == 2
 uniform mat3 u_ray;
 #ifdef AA
-uniform usampler2D u_runs;    // splat_runs.frag: where the pixel's runs start
+uniform usampler2D u_surfaces;  // splat_surfaces.frag: where the pixel's surfaces start
 #ifdef GEOMETRY_PATH
 uniform float u_shade_box;    // splats of wider boxes are shaded per pixel
 #endif
@@ -156,10 +154,10 @@ void mark(float u) {
 #endif
 #if defined(AA) && PASS == 2
 // This fragment's layer: how many of the surfaces after the first start at or
-// before its slice (splat_runs.frag packs the starts in 16 bits each).
+// before its slice (splat_surfaces.frag packs the starts in 16 bits each).
 int layer_of(float u) {
     uint s = uint(clamp(int(floor(u)), 0, SLICES - 1));
-    uvec4 r = texelFetch(u_runs, ivec2(gl_FragCoord.xy), 0);
+    uvec4 r = texelFetch(u_surfaces, ivec2(gl_FragCoord.xy), 0);
     uint starts[8] = uint[8](r.x & 0xFFFFu, r.x >> 16, r.y & 0xFFFFu, r.y >> 16,
                              r.z & 0xFFFFu, r.z >> 16, r.w & 0xFFFFu, 0xFFFFu);
     int k = 0;

@@ -4,13 +4,14 @@
 // In: u_layer[i], LAYERS layers front to back, each (sum of RGB c, sum of c)
 // over its fragments (c: the fraction of the pixel a splat covers; see
 // splat.frag, PASS 2 with AA): layer k < LAYERS - 1 holds the k-th surface
-// (run of marked depth slices) from the front, the last every surface from
-// there on; u_runs (splat_runs.frag), the number of runs in its w >> 16;
-// u_visible, the visibility pass's linear depth (t - near) / (far - near),
-// pushed. The rule (aniso3d/rendering/splat/reference.py is its NumPy twin):
+// from the front, the last every surface from there on; u_surfaces
+// (splat_surfaces.frag), the number of surfaces in its w >> 16; u_visible,
+// the visibility pass's linear depth (t - near) / (far - near), pushed.
+// The rule (aniso3d/rendering/splat/reference.py is its NumPy twin):
 //   within a surface, splats tile: its coverage is a = min(1, sum c);
-//   the last layer holds n = runs - (LAYERS - 1) surfaces, taken to share its
-//     sum equally: a = 1 - (1 - min(1, sum c / n))^n;
+//   the last layer holds n = surfaces - (LAYERS - 1) surfaces, taken to share
+//     its sum equally: a = 1 - (1 - min(1, sum c / n))^n (exact for equal
+//     ones, less than independent unequal ones would cover);
 //   surfaces in front hide those behind at random: front to back, with T the
 //     transmittance left (starts at 1), each layer adds T a of its
 //     coverage-weighted mean colour and T *= 1 - a (an opaque layer ends it).
@@ -22,11 +23,11 @@
 // and the visible layer's window depth. Pixels no splat reached are
 // discarded, so whatever the target holds there stays.
 #ifndef LAYERS
-#define LAYERS 5
+#define LAYERS 4
 #endif
 
 uniform sampler2D u_layer[LAYERS];
-uniform usampler2D u_runs;
+uniform usampler2D u_surfaces;
 uniform sampler2D u_visible;  // linear depth (t - near) / (far - near), pushed
 uniform vec2 u_depth;          // (K, t0 - near): window depth = K (t - near) / t
 uniform float u_near;
@@ -52,7 +53,7 @@ void main() {
     ivec2 px = ivec2(gl_FragCoord.xy);
     vec3 colour = vec3(0.0);
     float trans = 1.0;
-    float last = max(float(texelFetch(u_runs, px, 0).w >> 16) - float(LAYERS - 1), 1.0);
+    float last = max(float(texelFetch(u_surfaces, px, 0).w >> 16) - float(LAYERS - 1), 1.0);
     LAYER(0);
 #if LAYERS > 1
     LAYER(1);

@@ -46,7 +46,7 @@ class Targets:
     and its framebuffer; the point ids (R32UI, "fast"), the accumulation
     texture ("blend") and, for "high", the occupancy ``mask`` (an R32UI array
     of :data:`~aniso3d.rendering.splat.params.AA_SLICES` / 32 layers), the
-    ``runs`` texture and its framebuffer, and the ``layers``
+    ``surfaces`` texture (RGBA32UI) and its framebuffer, and the ``layers``
     (:data:`~aniso3d.rendering.splat.params.AA_LAYERS` RGBA textures) and
     theirs, each made by its pass."""
 
@@ -57,19 +57,19 @@ class Targets:
     accum: moderngl.Texture | None = None
     accumulate: moderngl.Framebuffer | None = None
     mask: moderngl.TextureArray | None = None
-    runs: moderngl.Texture | None = None
-    runs_fbo: moderngl.Framebuffer | None = None
+    surfaces: moderngl.Texture | None = None
+    surfaces_fbo: moderngl.Framebuffer | None = None
     layers: tuple = ()
     layered: moderngl.Framebuffer | None = None
 
     def framebuffers(self) -> tuple[moderngl.Framebuffer, ...]:
         """The framebuffers made so far."""
-        fbos = (self.geometry, self.visibility, self.accumulate, self.runs_fbo, self.layered)
+        fbos = (self.geometry, self.visibility, self.accumulate, self.surfaces_fbo, self.layered)
         return tuple(f for f in fbos if f is not None)
 
     def objects(self) -> tuple:
-        return (self.geometry, self.accumulate, self.runs_fbo, self.layered, self.visibility, self.ids,
-                self.accum, self.mask, self.runs, *self.layers, self.depth)  # fmt: skip
+        return (self.geometry, self.accumulate, self.surfaces_fbo, self.layered, self.visibility, self.ids,
+                self.accum, self.mask, self.surfaces, *self.layers, self.depth)  # fmt: skip
 
 
 def reach(opts: SplatOptions) -> float | None:

@@ -9,12 +9,12 @@
 // which takes every occupied slice less than u_span beyond its start; the
 // next occupied slice starts the next (aniso3d/rendering/splat/reference.py
 // is the NumPy twin).
-// Out: f_runs, the first slices of surfaces 1 .. LAYERS - 1 (surface 0 is the
+// Out: f_surfaces, the first slices of surfaces 1 .. LAYERS - 1 (surface 0 is the
 // nearest), 16 bits each in x, y, z and the low half of w (0xFFFF where there
 // is no such surface), and the number of surfaces in the high half of w;
 // the mask is cleared on the way (for the next draw).
 #ifndef LAYERS
-#define LAYERS 5
+#define LAYERS 4
 #endif
 #ifndef WORDS
 #define WORDS 16
@@ -27,7 +27,7 @@ layout(early_fragment_tests) in;
 layout(r32ui) uniform uimage2DArray u_mask;
 uniform float u_span;
 
-out uvec4 f_runs;
+out uvec4 f_surfaces;
 
 void main() {
     ivec2 px = ivec2(gl_FragCoord.xy);
@@ -52,6 +52,6 @@ void main() {
             w &= ~((1u << uint(ceil(skip))) - 1u);
         }
     }
-    f_runs = uvec4(starts[0] | (starts[1] << 16), starts[2] | (starts[3] << 16),
+    f_surfaces = uvec4(starts[0] | (starts[1] << 16), starts[2] | (starts[3] << 16),
                    starts[4] | (starts[5] << 16), starts[6] | (min(count, 0xFFFFu) << 16));
 }
