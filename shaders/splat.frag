@@ -146,10 +146,13 @@ float slice_of(float z) {
 }
 #endif
 #if defined(AA) && PASS == 1
-// Mark the slice holding slice coordinate u in this pixel's mask.
+// Mark the slice holding slice coordinate u in this pixel's mask (a plain
+// load first: most fragments find their bit set, and an atomic costs more).
 void mark(float u) {
     int k = clamp(int(floor(u)), 0, SLICES - 1);
-    imageAtomicOr(u_mask, ivec3(ivec2(gl_FragCoord.xy), k >> 5), 1u << uint(k & 31));
+    ivec3 at = ivec3(ivec2(gl_FragCoord.xy), k >> 5);
+    uint bit = 1u << uint(k & 31);
+    if ((imageLoad(u_mask, at).r & bit) == 0u) imageAtomicOr(u_mask, at, bit);
 }
 #endif
 #if defined(AA) && PASS == 2

@@ -51,6 +51,8 @@ void layer(vec4 acc, float n, inout vec3 colour, inout float trans) {
 
 void main() {
     ivec2 px = ivec2(gl_FragCoord.xy);
+    float visible = texelFetch(u_visible, px, 0).r;  // 1 where no splat was drawn
+    if (!(visible < 1.0)) discard;
     vec3 colour = vec3(0.0);
     float trans = 1.0;
     float last = max(float(texelFetch(u_surfaces, px, 0).w >> 16) - float(LAYERS - 1), 1.0);
@@ -83,6 +85,6 @@ void main() {
         vec3 x = colour - (1.0 - trans) * u_background;
         f_color = vec4(max(u_mode == 1 ? x : -x, 0.0), 1.0 - trans);
     }
-    float lin = texelFetch(u_visible, px, 0).r * u_range;  // t - near
+    float lin = visible * u_range;  // t - near
     gl_FragDepth = u_depth.x * lin / (u_near + lin);
 }
