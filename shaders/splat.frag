@@ -1,4 +1,8 @@
 #version 330
+#ifdef AA
+// Image atomics (OpenGL 4.2; the volume renderer already needs 4.3).
+#extension GL_ARB_shader_image_load_store : require
+#endif
 // Splat renderer (c), fragment stage: the exact ray-splat intersection.
 // In: SplatData (flat, from splat.vert or splat.geom; see splat.vert for the
 // homography rows hu, hv, hw, hc), gl_FragCoord. Uniforms: u_viewport,
@@ -31,40 +35,38 @@
 //     (a disc's or ellipse's across (1 - r) / |grad r|);
 //   in between (SplatData.regime) a blend. No centre pixel is forced; only
 //   the box splat.vert computed (SplatData.clip) is drawn, sprite or quad.
-// Depths are linear, (t - near) / (far - near) (a layer may be far thinner
+// Fragments with c < MIN_COVERAGE are dropped in both passes. A fragment's
+// depth z is linear, (t - near) / (far - near) (a surface may be far thinner
 // than a step of window depth far away), the plane's where the pixel's ray
-// meets it, else the centre's, clamped to the bounding sphere (zrange):
-//   PASS 1 writes the pushed depth where the splat's filtered box reaches
-//     (sub-pixel regime) or where c >= MIN_COVERAGE (resolved): the visible
-//     layer;
-//   PASS 2 (c >= MIN_COVERAGE) adds (RGB c, c) to SLABS layers, additively:
-//     at the position pos = 0 up to the visibility depth in u_visible,
-//     pos = log_G(1 + (G - 1) dt / D) at dt beyond it (G = GROWTH, D = u_push
-//     u_slab_min: layer k starts D (G^k - 1) / (G - 1) behind), shared
-//     linearly between the layers floor(pos) and floor(pos) + 1 (the last
-//     takes everything beyond), so nothing jumps when a surface crosses a
-//     boundary. For the layers from DEEP on, the coverage of resolved splats
-//     (c times the regime weight) also goes to f_resolved (channel = layer -
-//     DEEP). A splat whose box is wider than u_shade_box pixels is shaded per
-//     fragment in layer 0 (in the geometry path, which aniso3d/rendering/splat sends
-//     those splats through); any other fragment takes its splat's colour
-//     shaded once at the centre (SplatData.rgb). splat_aa_resolve.frag composites the layers.
+// meets it, else the centre's, clamped to zrange (the bounding sphere grown
+// by a few pixels: see splat.vert). The pixel's fragments are grouped into
+// surfaces by depth (aniso3d/rendering/splat/reference.py, the NumPy twin,
+// states the rule):
+//   PASS 1 writes the pushed depth z + push (the visible depth, kept for
+//     compositing with other draws) and sets the bit of z's slice in the
+//     pixel's occupancy mask u_mask (SLICES slices over the cloud's depths,
+//     u_slices) by atomic OR; splat_surfaces.frag then finds where the
+//     pixel's surfaces start (u_surfaces);
+//   PASS 2 adds (RGB c, c) to the layer of the fragment's surface: layer k
+//     holds the k-th surface from the front, the last (LAYERS - 1) every
+//     surface from there on. A splat whose box is wider than u_shade_box
+//     pixels is shaded per fragment in layer 0 (in the geometry path, which
+//     aniso3d/rendering/splat sends those splats through); any other
+//     fragment takes its splat's colour shaded once at the centre
+//     (SplatData.rgb). splat_aa_resolve.frag composites the layers.
 #include "lighting.glsl"
 #ifdef AA
 #include "splat_filter.glsl"
-#ifndef SLABS
-#define SLABS 4
+#ifndef LAYERS
+#define LAYERS 4
 #endif
-#ifndef DEEP
-#define DEEP 2
+#ifndef SLICES
+#define SLICES 512
 #endif
-#if SLABS > 7 || SLABS - DEEP > 4
-#error at most 7 layers, at most 4 of them deep (one more draw buffer holds their resolved parts)
+#if LAYERS > 8 || LAYERS < 1
+#error 1 to 8 layers (one draw buffer each)
 #endif
 #define MIN_COVERAGE 1e-4
-#ifndef GROWTH
-#define GROWTH 4.0
-#endif
 #endif
 
 #ifndef PASS
@@ -79,16 +81,20 @@ uniform vec2 u_srange;  // (near - t0, far - t0): the range of t - t0
 uniform vec2 u_depth;   // (K, t0 - near): window depth = K (t - near) / t
 #ifdef AA
 uniform float u_range;  // far - near
+uniform vec2 u_slices;  // (lo, scale): slice coordinate (z - lo) scale of a linear depth z
+#if PASS == 1
+layout(r32ui) uniform uimage2DArray u_mask;  // SLICES / 32 words per pixel
+#endif
 #endif
 #if PASS == 2
 uniform mat3 u_ray;
-uniform sampler2D u_visible;
 #ifdef AA
-uniform float u_push;
+uniform usampler2D u_surfaces;  // splat_surfaces.frag: where the pixel's surfaces start
 #ifdef GEOMETRY_PATH
 uniform float u_shade_box;    // splats of wider boxes are shaded per pixel
 #endif
-uniform float u_slab_min;     // a typical splat's larger half-axis, world units
+#else
+uniform sampler2D u_visible;
 #endif
 #endif
 
@@ -98,8 +104,7 @@ in SplatData SPLAT_DATA fs_in;
 #if PASS == 0
 out uint f_id;
 #elif PASS == 2 && defined(AA)
-layout(location = 0) out vec4 f_slab[SLABS];
-layout(location = SLABS) out vec4 f_resolved;  // (c of resolved splats) per deep layer
+layout(location = 0) out vec4 f_layer[LAYERS];  // (RGB c, c) of each layer
 #elif PASS == 2
 out vec4 f_color;
 #endif
@@ -135,20 +140,32 @@ float coverage(vec3 h, bool hit) {
     return mix(small, large, fs_in.regime);
 }
 
-// Whether the filtered exact shape reaches this pixel (PASS 1 of a resolved
-// splat; cheaper than its coverage).
-bool reached(vec3 h, bool hit) {
-    if (!hit) return false;
-    vec2 uv = h.xy / h.z;
-    vec2 k = 2.0 / (u_viewport * h.z);
-    vec2 gu = (fs_in.hu.yz - uv.x * fs_in.hw.yz) * k;
-    vec2 gv = (fs_in.hv.yz - uv.y * fs_in.hw.yz) * k;
-#if ROUND
-    // |grad r| <= sqrt(2) max(|grad u|, |grad v|)
-    return length(uv) <= 1.0 + 1.415 * FILTER_RADIUS * max(length(gu), length(gv));
-#else
-    return abs(uv.x) <= 1.0 + FILTER_RADIUS * length(gu) && abs(uv.y) <= 1.0 + FILTER_RADIUS * length(gv);
+// The slice coordinate of a linear depth.
+float slice_of(float z) {
+    return (z - u_slices.x) * u_slices.y;
+}
 #endif
+#if defined(AA) && PASS == 1
+// Mark the slice holding slice coordinate u in this pixel's mask (a plain
+// load first: most fragments find their bit set, and an atomic costs more).
+void mark(float u) {
+    int k = clamp(int(floor(u)), 0, SLICES - 1);
+    ivec3 at = ivec3(ivec2(gl_FragCoord.xy), k >> 5);
+    uint bit = 1u << uint(k & 31);
+    if ((imageLoad(u_mask, at).r & bit) == 0u) imageAtomicOr(u_mask, at, bit);
+}
+#endif
+#if defined(AA) && PASS == 2
+// This fragment's layer: how many of the surfaces after the first start at or
+// before its slice (splat_surfaces.frag packs the starts in 16 bits each).
+int layer_of(float u) {
+    uint s = uint(clamp(int(floor(u)), 0, SLICES - 1));
+    uvec4 r = texelFetch(u_surfaces, ivec2(gl_FragCoord.xy), 0);
+    uint starts[8] = uint[8](r.x & 0xFFFFu, r.x >> 16, r.y & 0xFFFFu, r.y >> 16,
+                             r.z & 0xFFFFu, r.z >> 16, r.w & 0xFFFFu, 0xFFFFu);
+    int k = 0;
+    for (int i = 0; i < LAYERS - 1; ++i) k += int(starts[i] <= s);
+    return k;
 }
 #endif
 
@@ -165,48 +182,26 @@ void main() {
     // range, where a layer may be far thinner than a step of window depth:
     // t - near = delta + (t - t0), the plane's where the ray meets it.
     float lin = hit ? (u_depth.y + sw / h.z) / u_range : fs_in.centre_z;
-#if PASS == 1
-    // A splat in the sub-pixel regime marks the pixels its filtered box
-    // reaches (without computing its coverage); a resolved one the pixels it
-    // covers. (A point sprite is a square: more than the splat's box.)
-    if (fs_in.regime < 0.5) {
-        if (any(greaterThanEqual(abs(gl_FragCoord.xy - fs_in.cpx), fs_in.box.xy + FILTER_RADIUS))) discard;
-    } else if (!reached(h, hit)) {
-        discard;
-    }
-    float z = hit ? lin + fs_in.push / u_range : fs_in.centre_zp;
-    gl_FragDepth = clamp(z, fs_in.zrange.x, fs_in.zrange.y);
-#elif PASS == 2
     float c = coverage(h, hit);
     if (!(c >= MIN_COVERAGE)) discard;
     float z = clamp(lin, fs_in.zrange.x, fs_in.zrange.y);
-    float vis = texelFetch(u_visible, ivec2(gl_FragCoord.xy), 0).r;
-    // Position among the layers, continuous: 0 up to the visibility depth,
-    // then one more per layer; a fragment is shared between the two layers
-    // it lies between, so nothing jumps when a surface crosses a boundary.
-    float pos = 0.0;
-    if (z > vis + 3e-7) {
-        float dt = (z - vis) * u_range;  // view depth beyond the visible layer
-        pos = log2(1.0 + (GROWTH - 1.0) * dt / (u_push * u_slab_min)) / log2(GROWTH);
-    }
-    int slab = min(int(pos), SLABS - 1);
-    float up = slab < SLABS - 1 ? fract(pos) : 0.0;
+    float u = slice_of(z);
+#if PASS == 1
+    mark(u);
+    // Below 1, so the surfaces pass (an early depth test) visits every marked pixel.
+    gl_FragDepth = clamp(z + fs_in.push / u_range, 0.0, 0.99999);
+#elif PASS == 2
+    int layer = layer_of(u);
     vec3 rgb = fs_in.rgb;
 #ifdef GEOMETRY_PATH
     vec2 extent = fs_in.clip.zw - fs_in.clip.xy;
-    if (slab == 0 && max(extent.x, extent.y) + 0.02 > u_shade_box && hit) {
+    if (layer == 0 && max(extent.x, extent.y) + 0.02 > u_shade_box && hit) {
         vec3 d = u_ray * xy1;
         rgb = clamp(shade(fs_in.n, -normalize(d), fs_in.kd, fs_in.spec.x, fs_in.spec.y), 0.0, 1.0);
     }
 #endif
     vec4 v = vec4(rgb * c, c);
-    for (int i = 0; i < SLABS; ++i) f_slab[i] = v * (i == slab ? 1.0 - up : i == slab + 1 ? up : 0.0);
-    vec4 deep = vec4(0.0);
-    for (int i = 0; i < 4; ++i) {
-        int k = i + DEEP;
-        deep[i] = c * fs_in.regime * (k == slab ? 1.0 - up : k == slab + 1 ? up : 0.0);
-    }
-    f_resolved = deep;
+    for (int i = 0; i < LAYERS; ++i) f_layer[i] = i == layer ? v : vec4(0.0);
 #endif
 #else
 #if ROUND

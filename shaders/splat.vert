@@ -46,9 +46,9 @@
 // regime weight (0: sub-pixel box formula with the true area, 1: the exact
 // shape with the size factor; by sqrt(true projected area) between
 // u_regime.x and .y pixels), linear depths (t - near) / (far - near) of the
-// centre (centre_z, centre_zp) and of its bounding sphere (zrange; pushed by
-// push in PASS 1), the box drawn (clip) and, in PASS 2, its colour shaded
-// once at the centre (for sub-pixel splats and hidden layers).
+// centre (centre_z, centre_zp) and of its bounding sphere (zrange), the box
+// drawn (clip) and, in PASS 2, its colour shaded once at the centre (for
+// sub-pixel splats and the layers behind the first).
 
 uniform vec3 u_q0;           // e + t0 f, local frame (see above)
 uniform float u_t0;          // view depth of the local origin
@@ -234,14 +234,13 @@ void main() {
         vs_out.regime = smoothstep(u_regime.x, u_regime.y, sqrt(area));
     }
     // Linear depths (t - near) / (far - near) of the bounding sphere's front
-    // and back (pushed in PASS 1).
+    // and back, the sphere grown by PLANE_REACH pixels at the centre's depth:
+    // a fragment's depth is where its pixel's ray meets the splat's plane,
+    // kept within these, so that the fragments of one tilted surface, however
+    // small its splats, lie at the surface's one depth on that ray.
     float rad = length(h);
-#if PASS == 1
-    float pz = push;
-#else
-    float pz = 0.0;
-#endif
-    vs_out.zrange = clamp((u_depth.y - gf + pz + vec2(-rad, rad)) / u_range, 0.0, 1.0);
+    if (depth >= u_near) rad += PLANE_REACH * depth / (0.5 * min(u_viewport.x * u_proj_scale.x, u_viewport.y * u_proj_scale.y));
+    vs_out.zrange = clamp((u_depth.y - gf + vec2(-rad, rad)) / u_range, 0.0, 1.0);
     // The centre's linear depth, plain and pushed.
     vs_out.centre_z = (u_depth.y - gf) / u_range;
     vs_out.centre_zp = (u_depth.y - gf + push) / u_range;

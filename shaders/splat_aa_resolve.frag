@@ -1,18 +1,20 @@
 #version 330
 // Splat renderer (c), compositing pass of quality "high" (coverage-aware),
 // fragment stage (vertex stage: splat_resolve.vert, one triangle).
-// In: u_slab[i], SLABS layers front to back, each (sum of RGB c, sum of c)
+// In: u_layer[i], LAYERS layers front to back, each (sum of RGB c, sum of c)
 // over its fragments (c: the fraction of the pixel a splat covers; see
-// splat.frag, PASS 2 with AA); u_resolved, per layer from DEEP on (channel
-// layer - DEEP), the part of that sum from resolved splats; u_visible, the
-// visibility pass's linear depth (t - near) / (far - near), pushed.
-// Compositing, front to back, T the transmittance left (starts at 1):
-//   layers before DEEP hold the visible surface: their splats tile it, so
-//     they fill what is left of the pixel additively, a = min(sum, T);
-//   a deeper layer spans many surfaces: its sub-pixel splats hide parts of
-//     each other at random, its resolved ones tile, so it covers
-//     a = T (1 - (1 - min(1, resolved)) exp(-(sum - resolved)));
-//   each adds a (its coverage-weighted mean colour) and T -= a.
+// splat.frag, PASS 2 with AA): layer k < LAYERS - 1 holds the k-th surface
+// from the front, the last every surface from there on; u_surfaces
+// (splat_surfaces.frag), the number of surfaces in its w >> 16; u_visible,
+// the visibility pass's linear depth (t - near) / (far - near), pushed.
+// The rule (aniso3d/rendering/splat/reference.py is its NumPy twin):
+//   within a surface, splats tile: its coverage is a = min(1, sum c);
+//   the last layer holds n = surfaces - (LAYERS - 1) surfaces, taken to share
+//     its sum equally: a = 1 - (1 - min(1, sum c / n))^n (exact for equal
+//     ones, less than independent unequal ones would cover);
+//   surfaces in front hide those behind at random: front to back, with T the
+//     transmittance left (starts at 1), each layer adds T a of its
+//     coverage-weighted mean colour and T *= 1 - a (an opaque layer ends it).
 // Out, by u_mode (aniso3d.rendering.splat.coverage.HighPass.composite), C the colour so
 // composited (premultiplied):
 //   0 (over what the target holds):  (C, 1 - T), blended src + (1 - src.a) dst;
@@ -20,15 +22,12 @@
 //                     C - (1 - T) u_background, alpha 1 - T;
 // and the visible layer's window depth. Pixels no splat reached are
 // discarded, so whatever the target holds there stays.
-#ifndef SLABS
-#define SLABS 4
-#endif
-#ifndef DEEP
-#define DEEP 2
+#ifndef LAYERS
+#define LAYERS 4
 #endif
 
-uniform sampler2D u_slab[SLABS];
-uniform sampler2D u_resolved;
+uniform sampler2D u_layer[LAYERS];
+uniform usampler2D u_surfaces;
 uniform sampler2D u_visible;  // linear depth (t - near) / (far - near), pushed
 uniform vec2 u_depth;          // (K, t0 - near): window depth = K (t - near) / t
 uniform float u_near;
@@ -38,43 +37,46 @@ uniform int u_mode;
 
 out vec4 f_color;
 
-// One layer (sampler arrays take constant indices only in GLSL 3.30, so the
-// loop over layers is unrolled below); resolved: the part of acc.a from
-// resolved splats, or -1 for a layer before DEEP.
-void layer(vec4 acc, float resolved, inout vec3 colour, inout float trans) {
+// One layer of n surfaces (sampler arrays take constant indices only in GLSL
+// 3.30, so the loop over layers is unrolled below).
+void layer(vec4 acc, float n, inout vec3 colour, inout float trans) {
     if (acc.a > 0.0) {
-        float r = clamp(resolved, 0.0, acc.a);
-        float a = resolved < 0.0 ? min(acc.a, trans) : trans * (1.0 - (1.0 - min(r, 1.0)) * exp(r - acc.a));
-        colour += a * (acc.rgb / acc.a);
-        trans -= a;
+        float a = n > 1.0 ? 1.0 - pow(1.0 - min(acc.a / n, 1.0), n) : min(acc.a, 1.0);
+        colour += trans * a * (acc.rgb / acc.a);
+        trans *= 1.0 - a;
     }
 }
 
-#define LAYER(i) layer(texelFetch(u_slab[i], px, 0), i >= DEEP ? res[max(i - DEEP, 0)] : -1.0, colour, trans)
+#define LAYER(i) layer(texelFetch(u_layer[i], px, 0), i == LAYERS - 1 ? last : 1.0, colour, trans)
 
 void main() {
     ivec2 px = ivec2(gl_FragCoord.xy);
+    float visible = texelFetch(u_visible, px, 0).r;  // 1 where no splat was drawn
+    if (!(visible < 1.0)) discard;
     vec3 colour = vec3(0.0);
     float trans = 1.0;
-    vec4 res = texelFetch(u_resolved, px, 0);
+    float last = max(float(texelFetch(u_surfaces, px, 0).w >> 16) - float(LAYERS - 1), 1.0);
     LAYER(0);
-#if SLABS > 1
+#if LAYERS > 1
     LAYER(1);
 #endif
-#if SLABS > 2
+#if LAYERS > 2
     LAYER(2);
 #endif
-#if SLABS > 3
+#if LAYERS > 3
     LAYER(3);
 #endif
-#if SLABS > 4
+#if LAYERS > 4
     LAYER(4);
 #endif
-#if SLABS > 5
+#if LAYERS > 5
     LAYER(5);
 #endif
-#if SLABS > 6
+#if LAYERS > 6
     LAYER(6);
+#endif
+#if LAYERS > 7
+    LAYER(7);
 #endif
     if (!(trans < 1.0)) discard;
     if (u_mode == 0) {
@@ -83,6 +85,6 @@ void main() {
         vec3 x = colour - (1.0 - trans) * u_background;
         f_color = vec4(max(u_mode == 1 ? x : -x, 0.0), 1.0 - trans);
     }
-    float lin = texelFetch(u_visible, px, 0).r * u_range;  // t - near
+    float lin = visible * u_range;  // t - near
     gl_FragDepth = u_depth.x * lin / (u_near + lin);
 }

@@ -19,8 +19,9 @@ order a frame uses them:
 - :mod:`~aniso3d.rendering.splat.fast`: ``quality="fast"``, opaque splats shaded
   once per pixel;
 - :mod:`~aniso3d.rendering.splat.coverage`: ``quality="high"`` (coverage-aware,
-  anti-aliased) and ``quality="blend"``, with their resolves, and
-  :mod:`~aniso3d.rendering.splat.params`, their measured parameters;
+  anti-aliased) and ``quality="blend"``, with their resolves,
+  :mod:`~aniso3d.rendering.splat.params`, their measured parameters, and
+  :mod:`~aniso3d.rendering.splat.reference`, the NumPy twin of "high";
 - :mod:`~aniso3d.rendering.splat.renderer`: :class:`SplatRenderer`, which
   implements :class:`~aniso3d.rendering.base.MethodRenderer` with the above.
 """
@@ -38,19 +39,20 @@ from aniso3d.rendering.splat.options import (
     shape_extent,
 )
 from aniso3d.rendering.splat.params import (
-    AA_DEEP,
     AA_DTYPE,
     AA_FILTER,
-    AA_GROWTH,
+    AA_LAYERS,
+    AA_PLANE_REACH,
     AA_REGIME,
     AA_SHADE_BOX,
-    AA_SLABS,
+    AA_SLICES,
+    AA_SPAN,
     ACCUM_DTYPE,
 )
 from aniso3d.rendering.splat.renderer import SplatRenderer
 
 __all__ = [
-    "AA_DEEP", "AA_DTYPE", "AA_FILTER", "AA_GROWTH", "AA_REGIME", "AA_SHADE_BOX", "AA_SLABS",
+    "AA_DTYPE", "AA_FILTER", "AA_LAYERS", "AA_PLANE_REACH", "AA_REGIME", "AA_SHADE_BOX", "AA_SLICES", "AA_SPAN",
     "ACCUM_DTYPE", "ATTRIB_PER_ROW", "BLOCK", "DEFAULT_ASPECT", "DEFAULT_PUSH", "FLOATS_PER_POINT",
     "GPULodPoints", "GPUPoints", "QUALITIES", "SHAPES", "SQUARE_SIZE_FACTOR", "SplatOptions",
     "SplatRenderer", "default_size_factor", "morton_order", "shape_extent", "splat_coverage_np",

@@ -12,24 +12,23 @@ the pixels sum to exactly that area wherever it lies: no splat takes a whole
 pixel, as in "fast", and none vanishes. A resolved splat (a few pixels and
 more) is its exact perspective shape with the size factor, each pair of
 edges filtered across its distance in pixels; between the two regimes
-(:data:`~aniso3d.rendering.splat.params.AA_REGIME`) the two blend. Three passes:
-visibility (as "blend", each pixel's nearest pushed depth, kept as a linear
-depth); accumulation of ``(colour c, c)`` into
-:data:`~aniso3d.rendering.splat.params.AA_SLABS` depth layers behind that depth
-(the first holds the visible surface, the others are thicker and thicker by
-:data:`~aniso3d.rendering.splat.params.AA_GROWTH`, and a fragment is shared
-between the two it lies between); and compositing front to back, like the
-volume renderer's: the visible surface's splats tile it (coverage added, at
-most what is left of the pixel), the splats of a deep layer hide each other
-at random (coverage ``1 - exp(-sum)``; resolved ones there still tile),
-colour the coverage-weighted mean. Splats of one surface shade once at their
-centre when sub-pixel, per pixel when resolved. The result is composited
-over what the target holds, or under it where that is nearer, so separately
-drawn clouds combine in either order. Measured on the default tree against
-8 x 8 supersampled polygons (docs/splat_aa.md): 30 to 34 dB PSNR at 512 x
-512 from a frame-filling camera to 18 times as far, against 16 to 20 dB for
-"fast" and "blend" and 24 to 30 dB for the volume renderer, for 1.2 to 1.5
-times the frame time of "blend" (3 to 4 times "fast").
+(:data:`~aniso3d.rendering.splat.params.AA_REGIME`) the two blend.
+
+Compositing: each pixel's fragments are grouped into surfaces by depth, and
+surfaces composite as independent layers; the rule is stated, and computed
+the slow way, in :mod:`~aniso3d.rendering.splat.reference`. Four passes:
+visibility (each pixel's nearest pushed depth, and the depth slice of every
+fragment set in the pixel's occupancy mask by an atomic OR); surfaces (a
+full-screen pass: where the pixel's surfaces start, from the mask, which it
+clears); accumulation of ``(colour c, c)`` into the layer of the fragment's
+surface (:data:`~aniso3d.rendering.splat.params.AA_LAYERS` layers, the last
+holding every surface from there on); and compositing front to back: within
+a surface coverages add (its splats tile it), across surfaces they compose
+as ``1 - prod(1 - a)``, so an opaque surface hides what lies behind it.
+Sub-pixel splats are shaded once at their centre, resolved ones per pixel in
+the first layer. The result is composited over what the target holds, or
+under it where that is nearer, so separately drawn clouds combine in either
+order. Measured against 8 x 8 supersampled polygons: docs/splat_aa.md.
 
 ``quality="blend"`` (the earlier "high") is the classic three passes:
 visibility (splats pushed back by ``push`` times their size), additive
@@ -43,12 +42,16 @@ pixel holding a splat's projected centre is always drawn).
 from __future__ import annotations
 
 import moderngl
+import numpy as np
 
 from aniso3d.rendering.frame import FrameView
 from aniso3d.rendering.splat.buffers import GPUPoints
 from aniso3d.rendering.splat.options import SplatOptions
-from aniso3d.rendering.splat.params import AA_DEEP, AA_DTYPE, AA_SLABS, ACCUM_DTYPE
+from aniso3d.rendering.splat.params import AA_DTYPE, AA_LAYERS, AA_SLICES, ACCUM_DTYPE
 from aniso3d.rendering.splat.pipeline import SplatPipeline, Targets
+
+#: Image unit the occupancy mask of quality "high" is bound to.
+MASK_UNIT = 0
 
 
 def visible_then_accumulate(
@@ -108,7 +111,8 @@ class BlendPass:
 
 
 class HighPass:
-    """Visibility, accumulation into depth layers, compositing
+    """Visibility with the occupancy mask, the surfaces pass
+    (``splat_surfaces.frag``), accumulation into layers, compositing
     (``splat_aa_resolve.frag``)."""
 
     quality = "high"
@@ -117,34 +121,67 @@ class HighPass:
         self.pipe = pipe
 
     def targets(self, size: tuple[int, int]) -> Targets:
-        """The shared targets plus the layers and their framebuffer."""
+        """The shared targets plus the mask, the surfaces and the layers."""
         tg = self.pipe.targets(size)
-        if len(tg.slabs) != AA_SLABS + 1:
+        words = AA_SLICES // 32
+        if tg.mask is None or tg.mask.layers != words or len(tg.layers) != AA_LAYERS:
             gl = self.pipe.gl
-            gl.free(tg.layered, *tg.slabs)
-            deep = min(4, max(1, AA_SLABS - AA_DEEP))  # channels of the resolved parts
-            tg.slabs = tuple(
-                gl.track(gl.ctx.texture(size, 4 if i < AA_SLABS else deep, dtype=AA_DTYPE))
-                for i in range(AA_SLABS + 1)
-            )
-            for tex in tg.slabs:
+            gl.free(tg.layered, tg.surfaces_fbo, tg.mask, tg.surfaces, *tg.layers)
+            # Cleared here; then the surfaces pass clears what each draw set.
+            zeros = np.zeros(size[0] * size[1] * words, "u4")
+            tg.mask = gl.track(gl.ctx.texture_array((*size, words), 1, zeros, dtype="u4"))
+            tg.surfaces = gl.track(gl.ctx.texture(size, 4, dtype="u4"))
+            tg.layers = tuple(gl.track(gl.ctx.texture(size, 4, dtype=AA_DTYPE)) for _ in range(AA_LAYERS))
+            for tex in (tg.mask, tg.surfaces, *tg.layers):
                 tex.filter = moderngl.NEAREST, moderngl.NEAREST
-            tg.layered = gl.track(gl.ctx.framebuffer(color_attachments=list(tg.slabs)))
+            # With the visibility depth: the surfaces pass runs where something was drawn.
+            tg.surfaces_fbo = gl.track(gl.ctx.framebuffer(color_attachments=[tg.surfaces], depth_attachment=tg.depth))
+            tg.layered = gl.track(gl.ctx.framebuffer(color_attachments=list(tg.layers)))
         return tg
 
     def draw(
         self, handle: GPUPoints, view: FrameView, opts: SplatOptions, uniforms: dict, tg: Targets,
         target, viewport,
     ) -> None:  # fmt: skip
-        """The three passes, the last composited onto ``target`` with ``viewport``."""
+        """The four passes, the last composited onto ``target`` with ``viewport``."""
         pipe = self.pipe
-        visible_then_accumulate(pipe, handle, view, opts, uniforms, tg, tg.layered)
-        textures = {"u_visible": tg.depth, "u_resolved": tg.slabs[-1]}
-        for i, tex in enumerate(tg.slabs[:-1]):
-            textures[f"u_slab[{i}]"] = tex
+        ctx = pipe.gl.ctx
+        # Visibility: the pushed nearest depth, and the occupancy mask.
+        tg.visibility.use()
+        tg.visibility.clear(depth=1.0)
+        tg.mask.bind_to_image(MASK_UNIT, read=True, write=True)
+        try:
+            pipe.splats(handle, view, opts, "visibility", {**uniforms, "u_mask": MASK_UNIT})
+            ctx.memory_barrier(moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
+            # Surfaces: where each pixel's surfaces start; clears the mask.
+            tg.surfaces_fbo.use()
+            tg.surfaces_fbo.depth_mask = False
+            ctx.depth_func = ">"
+            prog, vao = pipe.screen("splat_surfaces.frag", aa=True, far=True)
+            pipe.bind(prog, {"u_mask": MASK_UNIT, "u_span": uniforms["u_span"]})
+            vao.render(moderngl.TRIANGLES, vertices=3)
+        except Exception:
+            tg.mask.write(np.zeros(tg.mask.width * tg.mask.height * tg.mask.layers, "u4"))  # no stale bits
+            raise
+        ctx.depth_func = "<"
+        ctx.disable(moderngl.DEPTH_TEST)
+        ctx.memory_barrier(moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
+        # Accumulation into the layers.
+        tg.layered.use()
+        tg.layered.clear(0.0, 0.0, 0.0, 0.0)
+        ctx.enable(moderngl.BLEND)
+        ctx.blend_equation = moderngl.FUNC_ADD
+        ctx.blend_func = moderngl.ONE, moderngl.ONE
+        tg.surfaces.use(location=0)
+        pipe.splats(handle, view, opts, "accumulate", {**uniforms, "u_surfaces": 0})
+        ctx.disable(moderngl.BLEND)
+        ctx.enable(moderngl.DEPTH_TEST)
+        textures = {"u_visible": tg.depth, "u_surfaces": tg.surfaces}
+        for i, tex in enumerate(tg.layers):
+            textures[f"u_layer[{i}]"] = tex
         prog, vao = pipe.resolve("splat_aa_resolve.frag", textures, uniforms, target, viewport, aa=True)
-        units = [uniforms.pop(f"u_slab[{i}]") for i in range(len(tg.slabs) - 1)]
-        uniforms["u_slab"] = units if len(units) > 1 else units[0]
+        units = [uniforms.pop(f"u_layer[{i}]") for i in range(len(tg.layers))]
+        uniforms["u_layer"] = units if len(units) > 1 else units[0]
         self.composite(prog, vao, uniforms, target)
 
     def composite(self, prog, vao, uniforms: dict, target) -> None:

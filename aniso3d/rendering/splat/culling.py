@@ -1,7 +1,8 @@
 """Per-frame bounds on the CPU, from an upload's block bounds: which blocks of
 points may hold a splat too wide for a point sprite (:func:`large_blocks`),
-and the screen box holding every splat (:func:`screen_box`), to which clears
-and full-screen passes are restricted. Both are conservative."""
+the screen box holding every splat (:func:`screen_box`), to which clears
+and full-screen passes are restricted, and the view depths the splats span
+(:func:`depth_range`). All are conservative."""
 
 from __future__ import annotations
 
@@ -61,6 +62,24 @@ def large_blocks(
     return ranges
 
 
+def _frame_bounds(handle: GPUPoints, extent: tuple[float, float]) -> np.ndarray:
+    """(8, 3) corners, in the local frame, of a box holding every splat of the
+    cloud (for a pyramid upload, of the levels this frame draws)."""
+    bounds, largest = handle.bounds, float(handle.block_size.max())
+    if isinstance(handle, GPULodPoints) and handle.frame_box is not None:
+        bounds, largest = handle.frame_box  # the levels this frame draws
+    grow = largest * math.hypot(*extent)
+    lo, hi = bounds[0] - handle.origin - grow, bounds[1] - handle.origin + grow
+    return np.where(_CORNERS, hi, lo)
+
+
+def depth_range(handle: GPUPoints, view: FrameView, extent: tuple[float, float]) -> tuple[float, float]:
+    """(nearest, farthest) view depth, world units, that a splat of the cloud
+    may reach in this frame (its box grown by the largest splat)."""
+    depth = (_frame_bounds(handle, extent) - np.asarray(view.eye_local(handle.origin))) @ view.camera.forward
+    return float(depth.min()), float(depth.max())
+
+
 def screen_box(
     handle: GPUPoints, view: FrameView, extent: tuple[float, float], reach: float | None = None
 ) -> tuple[int, int, int, int] | None:
@@ -70,12 +89,7 @@ def screen_box(
     viewport or the cloud reaches behind the near plane. ``extent`` and
     ``reach`` as for :func:`large_blocks`."""
     w, h = view.size
-    bounds, largest = handle.bounds, float(handle.block_size.max())
-    if isinstance(handle, GPULodPoints) and handle.frame_box is not None:
-        bounds, largest = handle.frame_box  # the levels this frame draws
-    grow = largest * math.hypot(*extent)
-    lo, hi = bounds[0] - handle.origin - grow, bounds[1] - handle.origin + grow
-    corners = np.where(_CORNERS, hi, lo) - np.asarray(view.eye_local(handle.origin))
+    corners = _frame_bounds(handle, extent) - np.asarray(view.eye_local(handle.origin))
     cam = view.camera
     r, u, f = cam.basis()
     depth = corners @ f

@@ -1,6 +1,7 @@
 """Splat geometry on the CPU, float64: the
 pixels one splat covers (:func:`splat_coverage_np`, the slow, obvious twin of
-the GPU coverage test) and the Z-order the points are uploaded in."""
+the GPU coverage test), the Z-order the points are uploaded in and the depth
+slices of quality "high" (:func:`mask_slicing`)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,8 @@ import numpy as np
 
 from aniso3d.grid import tangent_frame
 from aniso3d.rendering.frame import FrameView
-from aniso3d.rendering.splat.options import DEFAULT_ASPECT, default_size_factor, shape_extent
+from aniso3d.rendering.splat.options import DEFAULT_ASPECT, SplatOptions, default_size_factor, shape_extent
+from aniso3d.rendering.splat.params import AA_SLICES, AA_SPAN
 
 
 def splat_coverage_np(
@@ -84,3 +86,21 @@ def morton_order(points: np.ndarray) -> np.ndarray:
             code |= ((q[:, axis] >> np.uint64(bit)) & np.uint64(1)) << np.uint64(3 * bit + axis)
     return np.argsort(code, kind="stable")
 
+
+
+def mask_slicing(
+    view: FrameView, depth_lo: float, depth_hi: float, typical_size: float, opts: SplatOptions
+) -> tuple[float, float, float]:
+    """The depth slices of quality "high" for a cloud whose splats reach view
+    depths ``depth_lo`` .. ``depth_hi`` (world units) and whose typical
+    (median) ``sqrt(area)`` is ``typical_size``: (lo, scale, span). A linear
+    depth z = (t - near) / (far - near) lies in slice ``floor((z - lo) * scale)``
+    (:data:`~aniso3d.rendering.splat.params.AA_SLICES` slices over the cloud's
+    depths); one surface spans ``span`` slices (at least 1):
+    :data:`~aniso3d.rendering.splat.params.AA_SPAN` times ``push`` times a
+    typical splat's larger half-axis."""
+    near, far = float(view.near), float(view.far)
+    lo, hi = (min(max((d - near) / (far - near), 0.0), 1.0) for d in (depth_lo, depth_hi))
+    scale = AA_SLICES / max(hi - lo, 1e-30)
+    span = AA_SPAN * opts.push * typical_size * max(opts.extent) / (far - near) * scale
+    return lo, scale, max(span, 1.0)

@@ -40,9 +40,10 @@ DEFAULT_ASPECT = 2.0
 #: image-wide mean colour error, dominated by silhouettes, is lowest at 1.15.)
 SQUARE_SIZE_FACTOR = 1.3
 #: Visibility push-back of ``quality="high"`` and ``"blend"``, in units of the
-#: splat's larger half-axis, along the view axis: splats of the front surface
-#: within this depth of the nearest one blend; farther ones are hidden
-#: ("blend") or go to the layers behind ("high").
+#: splat's larger half-axis, along the view axis: in "blend", splats of the
+#: front surface within this depth of the nearest one blend and farther ones
+#: are hidden; in "high", one surface spans AA_SPAN times this times a typical
+#: splat's larger half-axis (splats within it add, surfaces beyond compose).
 DEFAULT_PUSH = 1.0
 
 
@@ -88,7 +89,8 @@ class SplatOptions(DrawOptions):
             construction).
         aspect: major over minor axis of ``ellipse`` splats, >= 1.
         push: visibility push-back of "high" and "blend", in units of a
-            splat's larger half-axis, >= 0.
+            splat's larger half-axis, >= 0; in "high" also the depth one
+            surface spans (times ``AA_SPAN`` and a typical splat's).
         pixel_error: level-of-detail uploads only: the largest a drawn voxel
             may be on screen, framebuffer pixels (None: 1).
     """

@@ -18,24 +18,30 @@ ACCUM_DTYPE = "f2"
 #: the box 30.2 to 34.1 dB; the tent 1.1-2.9 dB and the B-spline 2.1-4.1 dB
 #: lower (blurrier than the truth, and more coverage spread past silhouettes).
 AA_FILTER = 0
-#: Depth layers of ``quality="high"``: the visible one and AA_SLABS - 1 behind
-#: it (at most 7; at most 4 from AA_DEEP on). Measured as above (mean PSNR over
-#: the five cameras): 4 layers growing by 4, 32.5 dB; 6 growing by 2, 32.6 dB
-#: for about 10 % more time; 3 growing by 8, 32.4 dB; 2 (first deep layer 1)
-#: 32.5 dB, but see AA_DEEP.
-AA_SLABS = 4
-#: Each layer behind the visible one is this many times as thick as the one
-#: before; the first is ``push`` times a typical (median) splat's larger
-#: half-axis.
-AA_GROWTH = 4.0
-#: First layer whose splats are taken to hide each other at random (coverage
-#: 1 - exp(-sum), resolved splats excepted) rather than to tile one surface;
-#: the layers before fill the pixel additively. Measured: with 1, a surface
-#: seen at a grazing angle (a sphere's rim) spans the boundary and its
-#: coverage flickers with the view (0.7 % of pixels of a telephoto sphere change
-#: by more than 2 levels between 1e4 and 1e7 units away; 0.1 % with 2); with 3
-#: the tree's mean PSNR drops by 0.9 dB (its crown is no surface). So 2.
-AA_DEEP = 2
+#: Layers of ``quality="high"``: the first AA_LAYERS - 1 surfaces of a pixel
+#: from the front, one layer each, and every surface from there on in the
+#: last (at most 8, one draw buffer each). A surface is a run of marked depth
+#: slices (see AA_SLICES and aniso3d.rendering.splat.reference).
+AA_LAYERS = 4
+#: Depth slices of the per-pixel occupancy mask of ``quality="high"`` over the
+#: cloud's depth range in the view (a multiple of 32, at most 4096; one bit
+#: each, AA_SLICES / 8 bytes per pixel). A fragment marks the slices within
+#: its tolerance (``push`` times its larger half-axis) of its depth; a run of
+#: marked slices is one surface, so two surfaces are told apart when a slice
+#: or more lies between their tolerance intervals.
+AA_SLICES = 512
+#: Depth one surface of ``quality="high"`` spans, in units of ``push`` times a
+#: typical (median) splat's larger half-axis: a pixel's nearest occupied
+#: slice starts a surface, which takes every fragment within this depth; the
+#: next occupied slice beyond starts the next surface.
+AA_SPAN = 2.0
+#: A fragment's depth in quality "high" is where its pixel's ray meets the
+#: splat's plane, kept within the splat's bounding sphere grown by this many
+#: pixels (at the splat's depth): the fragments of a tilted surface tiled by
+#: splats far smaller than a pixel meet that ray at the surface's one depth,
+#: so they stay one surface (the bounding sphere alone split a plane tilted
+#: 60 degrees into several, letting a quarter of the background through).
+AA_PLANE_REACH = 2.0
 #: A splat whose true projected area is below AA_REGIME[0]^2 pixels is drawn as
 #: a filtered box of its true area; above AA_REGIME[1]^2, as its exact shape
 #: with the size factor (which closes the gaps between resolved splats); a
@@ -51,7 +57,7 @@ AA_REGIME = (1.0, 3.0)
 #: pixel ran it; at 8 px, every block of that frame took the (slower)
 #: geometry path.
 AA_SHADE_BOX = 32.0
-#: Texture type of the layers: AA_SLABS + 1 targets, 80 bytes per pixel
+#: Texture type of the layers: AA_LAYERS targets, 80 bytes per pixel
 #: (80 MiB at 1024 x 1024). Half floats drop small coverages added to large
 #: sums; that happens to help where the crown's fringe is over-covered (0.5
 #: and 1.6 dB higher PSNR at the two farthest cameras), which is no reason to

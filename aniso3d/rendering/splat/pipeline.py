@@ -25,15 +25,16 @@ from aniso3d.errors import ResourceError
 from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.frame import FrameView
 from aniso3d.rendering.splat.buffers import ATTRIBUTES, GPULodPoints, GPUPoints
-from aniso3d.rendering.splat.culling import large_blocks
+from aniso3d.rendering.splat.culling import depth_range, large_blocks
+from aniso3d.rendering.splat.geometry import mask_slicing
 from aniso3d.rendering.splat.options import SplatOptions
 from aniso3d.rendering.splat.params import (
-    AA_DEEP,
     AA_FILTER,
-    AA_GROWTH,
+    AA_LAYERS,
+    AA_PLANE_REACH,
     AA_REGIME,
     AA_SHADE_BOX,
-    AA_SLABS,
+    AA_SLICES,
     filter_radius,
 )
 
@@ -43,9 +44,11 @@ class Targets:
     """Offscreen buffers for one framebuffer size, made on first use: the depth
     texture (geometry pass of "fast", visibility pass of "high" and "blend")
     and its framebuffer; the point ids (R32UI, "fast"), the accumulation
-    texture ("blend") and the layers of "high" (``slabs``:
-    :data:`~aniso3d.rendering.splat.params.AA_SLABS` RGBA textures and one for
-    the deep layers' resolved coverage), each made by its pass."""
+    texture ("blend") and, for "high", the occupancy ``mask`` (an R32UI array
+    of :data:`~aniso3d.rendering.splat.params.AA_SLICES` / 32 layers), the
+    ``surfaces`` texture (RGBA32UI) and its framebuffer, and the ``layers``
+    (:data:`~aniso3d.rendering.splat.params.AA_LAYERS` RGBA textures) and
+    theirs, each made by its pass."""
 
     depth: moderngl.Texture
     visibility: moderngl.Framebuffer
@@ -53,17 +56,20 @@ class Targets:
     geometry: moderngl.Framebuffer | None = None
     accum: moderngl.Texture | None = None
     accumulate: moderngl.Framebuffer | None = None
-    slabs: tuple = ()
+    mask: moderngl.TextureArray | None = None
+    surfaces: moderngl.Texture | None = None
+    surfaces_fbo: moderngl.Framebuffer | None = None
+    layers: tuple = ()
     layered: moderngl.Framebuffer | None = None
 
     def framebuffers(self) -> tuple[moderngl.Framebuffer, ...]:
         """The framebuffers made so far."""
-        fbos = (self.geometry, self.visibility, self.accumulate, self.layered)
+        fbos = (self.geometry, self.visibility, self.accumulate, self.surfaces_fbo, self.layered)
         return tuple(f for f in fbos if f is not None)
 
     def objects(self) -> tuple:
-        return (self.geometry, self.accumulate, self.layered, self.visibility, self.ids,
-                self.accum, *self.slabs, self.depth)  # fmt: skip
+        return (self.geometry, self.accumulate, self.surfaces_fbo, self.layered, self.visibility, self.ids,
+                self.accum, self.mask, self.surfaces, *self.layers, self.depth)  # fmt: skip
 
 
 def reach(opts: SplatOptions) -> float | None:
@@ -97,7 +103,7 @@ class SplatPipeline:
         defines["PASS"] = {"geometry": 0, "visibility": 1, "accumulate": 2}[kind]
         if aa:
             defines.update(
-                AA=1, SLABS=AA_SLABS, DEEP=AA_DEEP, FILTER=AA_FILTER, GROWTH=f"{AA_GROWTH:.6f}"
+                AA=1, LAYERS=AA_LAYERS, SLICES=AA_SLICES, FILTER=AA_FILTER, PLANE_REACH=float(AA_PLANE_REACH)
             )
         if sprite:
             return self.gl.program("splat.vert", "splat.frag", defines=defines)
@@ -145,11 +151,14 @@ class SplatPipeline:
         return vao
 
     def screen(
-        self, fragment: str, aa: bool = False
+        self, fragment: str, aa: bool = False, far: bool = False
     ) -> tuple[moderngl.Program, moderngl.VertexArray]:
-        """A full-screen pass: one triangle, no vertex buffer (``aa``: the
-        compositing pass of quality "high", with its defines)."""
-        defines = {"SLABS": AA_SLABS, "DEEP": AA_DEEP} if aa else None
+        """A full-screen pass: one triangle, no vertex buffer (``aa``: a pass
+        of quality "high", with its defines; ``far``: the triangle at the far
+        plane, for an early depth test)."""
+        defines: dict[str, object] = {"LAYERS": AA_LAYERS, "WORDS": AA_SLICES // 32} if aa else {}
+        if far:
+            defines["FAR"] = 1
         prog = self.gl.program("splat_resolve.vert", fragment, defines=defines)
         vao = self._screen_vaos.get(id(prog))
         if vao is None:
@@ -172,6 +181,7 @@ class SplatPipeline:
         eye = np.asarray(view.eye_local(handle.origin), np.float64)
         t0 = -float(eye @ f)
         q0 = eye + t0 * f
+        lo, scale, span = mask_slicing(view, *depth_range(handle, view, opts.extent), handle.typical_size, opts)
         return {
             "u_q0": tuple(float(x) for x in q0),
             "u_t0": t0,
@@ -189,7 +199,8 @@ class SplatPipeline:
             "u_range": far - near,
             "u_size_factor": opts.size_factor,
             "u_regime": tuple(float(x) for x in AA_REGIME),
-            "u_slab_min": handle.typical_size * max(opts.extent),
+            "u_slices": (lo, scale),
+            "u_span": span,
             "u_background": tuple(float(x) for x in view.lighting.background),
             **view.lighting.uniforms(),
         }

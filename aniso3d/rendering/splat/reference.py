@@ -1,0 +1,228 @@
+"""NumPy twins of quality "high", slow, obvious and in float64, for the tests
+to hold the GPU to: the fragments of sub-pixel splats
+(:func:`subpixel_fragments_np`, the twin of splat.vert and splat.frag for
+splats below a pixel) and the compositing of fragments
+(:func:`composite_np`, the twin of the mask, surfaces, accumulation and
+compositing passes).
+
+The compositing rule, per pixel, from its fragments (coverage c: the
+fraction of the pixel a splat covers; linear depth z; colour):
+
+1. Fragments with c below :data:`MIN_COVERAGE` are dropped.
+2. Depth is cut into :data:`~aniso3d.rendering.splat.params.AA_SLICES`
+   slices over the cloud's depths (:func:`~aniso3d.rendering.splat.geometry.mask_slicing`);
+   a slice holding a fragment is occupied.
+3. Surfaces, front to back: the nearest occupied slice starts one, which
+   takes every occupied slice less than ``span`` slices beyond its start
+   (one surface's splats lie within a depth of a few splat sizes); the next
+   occupied slice beyond starts the next surface.
+4. Layer k holds surface k, for k < :data:`~aniso3d.rendering.splat.params.AA_LAYERS` - 1;
+   the last layer every surface from there on.
+5. Within a surface splats tile it, so coverages add: a = min(1, sum c); the
+   last layer's n surfaces are taken to share its sum equally,
+   a = 1 - (1 - min(1, sum c / n))^n. Its colour is the coverage-weighted
+   mean of its fragments' colours.
+6. Surfaces hide each other at random, front to back: with T the
+   transmittance left (1 at first), a layer adds T a times its colour and
+   T *= 1 - a, so an opaque layer hides everything behind it, and
+   translucent ones compose as 1 - prod(1 - a_k).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from aniso3d.build.points import PointCloud
+from aniso3d.errors import InputError
+from aniso3d.grid import tangent_frame
+from aniso3d.rendering.frame import FrameView
+from aniso3d.rendering.lighting import shade_np
+from aniso3d.rendering.splat.geometry import mask_slicing
+from aniso3d.rendering.splat.options import SplatOptions
+from aniso3d.rendering.splat.params import AA_FILTER, AA_LAYERS, AA_PLANE_REACH, AA_REGIME, AA_SLICES
+
+#: Fragments covering less of their pixel than this are dropped (splat.frag).
+MIN_COVERAGE = 1e-4
+
+
+@dataclass(frozen=True)
+class Fragments:
+    """What the splats of one draw leave in the pixels, one row per fragment.
+
+    Attributes:
+        pixel: (F,) int64 flat pixel index ``row * width + column``, row 0 at
+            the top of the image.
+        coverage: (F,) float64 fraction of the pixel the splat covers, [0, 1].
+        depth: (F,) float64 linear depth (t - near) / (far - near) of the
+            fragment (t: view depth, world units).
+        rgb: (F, 3) float64 shaded colour in [0, 1].
+        size: (width, height) of the image, pixels.
+        slicing: (lo, scale, span) of the draw's depth slices
+            (:func:`~aniso3d.rendering.splat.geometry.mask_slicing`).
+    """
+
+    pixel: np.ndarray
+    coverage: np.ndarray
+    depth: np.ndarray
+    rgb: np.ndarray
+    size: tuple[int, int]
+    slicing: tuple[float, float, float]
+
+    def __post_init__(self) -> None:
+        n = len(self.pixel)
+        for name, arr, shape in (("coverage", self.coverage, (n,)), ("depth", self.depth, (n,)),
+                                 ("rgb", self.rgb, (n, 3))):  # fmt: skip
+            if np.shape(arr) != shape:
+                raise InputError(f"fragment {name} must have shape {shape}, got {np.shape(arr)}")
+
+
+def _box_cdf(x: np.ndarray) -> np.ndarray:
+    """The pixel box filter's cumulative distribution (splat_filter.glsl, FILTER 0)."""
+    return np.clip(x + 0.5, 0.0, 1.0)
+
+
+def subpixel_fragments_np(cloud: PointCloud, view: FrameView, opts: SplatOptions) -> Fragments:
+    """The fragments quality "high" draws for ``cloud``, every splat of which
+    must be in the sub-pixel regime (true projected area at most
+    ``AA_REGIME[0]^2`` pixels) and in front of the near plane.
+
+    The twin of splat.vert and splat.frag there: each splat is an axis-aligned
+    box in the image with the second moments of its true projected area (no
+    size factor) and an amplitude that keeps that area; its coverage of a pixel
+    is the box filtered by the pixel's box and sampled at the pixel centre.
+    A fragment's depth is where the pixel centre's ray meets the splat's plane
+    (else the centre's), clamped to the splat's bounding sphere grown by
+    :data:`~aniso3d.rendering.splat.params.AA_PLANE_REACH` pixels; its colour
+    is shade() at the centre, seen from the eye.
+    """
+    if AA_FILTER != 0:
+        raise InputError("the NumPy twin implements the box pixel filter (AA_FILTER = 0) only")
+    w, h = view.size
+    cam = view.camera
+    r, u, f = cam.basis()
+    tan = math.tan(math.radians(cam.fov) / 2)
+    proj = np.array([1.0 / (tan * view.aspect), 1.0 / tan])
+    near, far = float(view.near), float(view.far)
+    eye = np.asarray(cam.position, np.float64)
+    p = cloud.positions - eye
+    n = cloud.normals
+    t_ax, b_ax = tangent_frame(n)
+    size = np.sqrt(cloud.areas)
+    hx, hy = (e * size for e in opts.extent)  # drawn half-axes, world units
+    rot = np.stack([r, u, -f])  # eye <- world
+    ce, te, be = p @ rot.T, (t_ax * hx[:, None]) @ rot.T, (b_ax * hy[:, None]) @ rot.T
+    depth = -ce[:, 2]
+    if np.any(depth < near):
+        raise InputError("the NumPy twin draws splats whose centres lie beyond the near plane only")
+    pix = 0.5 * np.array([w, h]) * proj / depth[:, None]
+    cpx = (ce[:, :2] * proj / depth[:, None] * 0.5 + 0.5) * np.array([w, h])
+    pu = pix * (te[:, :2] + ce[:, :2] * (te[:, 2] / depth)[:, None]) / opts.size_factor
+    pv = pix * (be[:, :2] + ce[:, :2] * (be[:, 2] / depth)[:, None]) / opts.size_factor
+    area_unit, moment = (4.0, 1.0) if opts.splat == "square" else (math.pi, 0.75)
+    area = area_unit * np.abs(pu[:, 0] * pv[:, 1] - pu[:, 1] * pv[:, 0])
+    if np.any(np.sqrt(area) > AA_REGIME[0]):
+        raise InputError(
+            f"the NumPy twin draws sub-pixel splats only (true projected area <= {AA_REGIME[0] ** 2:g} px^2); "
+            f"the largest here is {area.max():.3g} px^2"
+        )
+    half = np.sqrt(moment * (pu * pu + pv * pv))
+    box = 4.0 * half[:, 0] * half[:, 1]
+    grow = area > box  # a disc's moment box is smaller than the disc
+    half[grow] *= np.sqrt(area[grow] / box[grow])[:, None]
+    box = np.where(grow, area, box)
+    amp = np.divide(area, box, out=np.zeros_like(area), where=box > 0)
+    # Every pixel the filtered box reaches: a window of offsets around the centre.
+    reach = int(math.ceil(float(half.max(initial=0.0)) + 1.0))
+    off = np.arange(-reach, reach + 1)
+    ox, oy = (a.ravel() for a in np.meshgrid(off, off))
+    ix = np.floor(cpx[:, 0])[:, None].astype(np.int64) + ox[None]
+    iy = np.floor(cpx[:, 1])[:, None].astype(np.int64) + oy[None]
+    dx, dy = ix + 0.5 - cpx[:, :1], iy + 0.5 - cpx[:, 1:]
+    cov = (amp[:, None] * (_box_cdf(dx + half[:, :1]) - _box_cdf(dx - half[:, :1]))
+           * (_box_cdf(dy + half[:, 1:]) - _box_cdf(dy - half[:, 1:])))  # fmt: skip
+    keep = (cov >= MIN_COVERAGE) & (ix >= 0) & (ix < w) & (iy >= 0) & (iy < h)
+    splat, _ = np.nonzero(keep)
+    ix, iy, cov = ix[keep], iy[keep], cov[keep]
+    # Depth: the pixel centre's ray d = f + x R + y U (d . f = 1, so t is the
+    # view depth) meets the plane n . (q - p) = 0 at t = n . p / n . d.
+    x = (ix + 0.5) / w * 2.0 - 1.0
+    y = (iy + 0.5) / h * 2.0 - 1.0
+    d = f + x[:, None] * (r / proj[0]) + y[:, None] * (u / proj[1])
+    nd = np.einsum("ij,ij->i", n[splat], d)
+    npn = np.einsum("ij,ij->i", n[splat], p[splat])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = npn / nd
+    hit = (nd != 0) & (t >= near) & (t <= far)
+    lin = np.where(hit, (t - near) / (far - near), (depth[splat] - near) / (far - near))
+    # The bounding sphere grown by AA_PLANE_REACH pixels at the centre's depth.
+    rad = (np.hypot(hx, hy) + AA_PLANE_REACH / pix.min(axis=1))[splat]
+    zlo = np.clip((depth[splat] - near - rad) / (far - near), 0.0, 1.0)
+    zhi = np.clip((depth[splat] - near + rad) / (far - near), 0.0, 1.0)
+    z = np.clip(lin, zlo, zhi)
+    view_dir = -p / np.linalg.norm(p, axis=1, keepdims=True)
+    rgb = np.clip(shade_np(n, view_dir, cloud.kd, cloud.ks, cloud.shininess, view.lighting), 0.0, 1.0)
+    # The slices span the view depths the cloud's splats may reach
+    # (culling.depth_range: the bounds grown by the largest splat).
+    b = cloud.bounds + np.array([[-1.0], [1.0]]) * float(size.max()) * math.hypot(*opts.extent)
+    corners = np.array([[x_, y_, z_] for x_ in b[:, 0] for y_ in b[:, 1] for z_ in b[:, 2]])
+    corner_depth = (corners - eye) @ f
+    slicing = mask_slicing(view, float(corner_depth.min()), float(corner_depth.max()), float(np.median(size)), opts)
+    pixel = (h - 1 - iy) * w + ix
+    return Fragments(pixel, cov, z, rgb[splat], (w, h), slicing)
+
+
+def surfaces_np(pixel: np.ndarray, slice_index: np.ndarray, n_pixels: int, span: float):
+    """The surfaces of each pixel (rule steps 2 and 3): (starts, count), with
+    ``starts`` (n_pixels, S) float64 the first slice of each surface front to
+    back (inf past the last) and ``count`` (n_pixels,) how many there are."""
+    occupied = np.zeros((n_pixels, AA_SLICES), bool)
+    occupied[pixel, slice_index] = True
+    column = np.arange(AA_SLICES)
+    limit = np.full(n_pixels, -np.inf)
+    starts = []
+    while True:
+        later = occupied & (column[None] >= limit[:, None])
+        found = later.any(axis=1)
+        if not found.any():
+            break
+        first = np.where(found, np.argmax(later, axis=1), np.inf)
+        starts.append(first)
+        limit = np.where(found, first + span, np.inf)
+    starts_arr = np.stack(starts, axis=1) if starts else np.full((n_pixels, 1), np.inf)
+    return starts_arr, np.isfinite(starts_arr).sum(axis=1)
+
+
+def composite_np(
+    frags: Fragments, background=(1.0, 1.0, 1.0), layers: int = AA_LAYERS
+) -> tuple[np.ndarray, np.ndarray]:
+    """The image quality "high" composites from ``frags`` over ``background``
+    (the module docstring's rule): (rgb (H, W, 3), alpha (H, W)), float64,
+    row 0 at the top; rgb = composited colour + (1 - alpha) background, as
+    drawn over a target cleared to the background."""
+    w, h = frags.size
+    lo, scale, span = frags.slicing
+    keep = frags.coverage >= MIN_COVERAGE
+    pixel, c, rgb = frags.pixel[keep], frags.coverage[keep], frags.rgb[keep]
+    s = np.clip(np.floor((frags.depth[keep] - lo) * scale), 0, AA_SLICES - 1).astype(np.int64)
+    starts, count = surfaces_np(pixel, s, w * h, span)
+    surface = (starts[pixel] <= s[:, None]).sum(axis=1) - 1
+    layer = np.minimum(surface, layers - 1)
+    total = np.zeros((w * h, layers))
+    colour = np.zeros((w * h, layers, 3))
+    np.add.at(total, (pixel, layer), c)
+    np.add.at(colour, (pixel, layer), rgb * c[:, None])
+    out = np.zeros((w * h, 3))
+    trans = np.ones(w * h)
+    last = np.maximum(count - (layers - 1), 1).astype(np.float64)
+    for k in range(layers):
+        a_sum = total[:, k]
+        n = last if k == layers - 1 else np.ones(w * h)
+        a = np.where(n > 1, 1.0 - (1.0 - np.minimum(a_sum / n, 1.0)) ** n, np.minimum(a_sum, 1.0))
+        mean = np.divide(colour[:, k], a_sum[:, None], out=np.zeros((w * h, 3)), where=a_sum[:, None] > 0)
+        out += (trans * a)[:, None] * mean
+        trans *= 1.0 - a
+    out += trans[:, None] * np.asarray(background, np.float64)
+    return out.reshape(h, w, 3), (1.0 - trans).reshape(h, w)

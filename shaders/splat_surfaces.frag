@@ -1,0 +1,57 @@
+#version 430
+// Splat renderer (c), surfaces pass of quality "high" (coverage-aware),
+// fragment stage (vertex stage: splat_resolve.vert, one triangle).
+// In: u_mask, each pixel's occupancy mask of SLICES depth slices (WORDS 32-bit
+// words, layer k of the array holding slices 32 k .. 32 k + 31), a bit set
+// for each slice holding a fragment's depth (splat.frag, PASS 1 with AA);
+// u_span, the depth a surface may span, in slices (>= 1).
+// The pixel's surfaces, front to back: the nearest occupied slice starts one,
+// which takes every occupied slice less than u_span beyond its start; the
+// next occupied slice starts the next (aniso3d/rendering/splat/reference.py
+// is the NumPy twin).
+// Out: f_surfaces, the first slices of surfaces 1 .. LAYERS - 1 (surface 0 is the
+// nearest), 16 bits each in x, y, z and the low half of w (0xFFFF where there
+// is no such surface), and the number of surfaces in the high half of w;
+// the mask is cleared on the way (for the next draw).
+#ifndef LAYERS
+#define LAYERS 4
+#endif
+#ifndef WORDS
+#define WORDS 16
+#endif
+
+// Only pixels something was drawn in (the visibility depth below 1): the
+// depth test runs first (splat_resolve.vert with FAR, depth test GREATER).
+layout(early_fragment_tests) in;
+
+layout(r32ui) uniform uimage2DArray u_mask;
+uniform float u_span;
+
+out uvec4 f_surfaces;
+
+void main() {
+    ivec2 px = ivec2(gl_FragCoord.xy);
+    uint starts[8] = uint[8](0xFFFFu, 0xFFFFu, 0xFFFFu, 0xFFFFu, 0xFFFFu, 0xFFFFu, 0xFFFFu, 0xFFFFu);
+    uint count = 0u;
+    float limit = -1.0;  // the current surface takes the slices below this
+    for (int k = 0; k < WORDS; ++k) {
+        uint w = imageLoad(u_mask, ivec3(px, k)).r;
+        if (w == 0u) continue;
+        imageStore(u_mask, ivec3(px, k), uvec4(0u));
+        // Drop the slices the current surface still takes.
+        float skip = limit - float(32 * k);
+        if (skip > 31.0) continue;
+        if (skip > 0.0) w &= ~((1u << uint(ceil(skip))) - 1u);
+        while (w != 0u) {
+            int s = 32 * k + findLSB(w);
+            if (count >= 1u && count < uint(LAYERS)) starts[count - 1u] = uint(s);
+            count += 1u;
+            limit = float(s) + u_span;
+            skip = limit - float(32 * k);
+            if (skip > 31.0) break;
+            w &= ~((1u << uint(ceil(skip))) - 1u);
+        }
+    }
+    f_surfaces = uvec4(starts[0] | (starts[1] << 16), starts[2] | (starts[3] << 16),
+                   starts[4] | (starts[5] << 16), starts[6] | (min(count, 0xFFFFu) << 16));
+}
