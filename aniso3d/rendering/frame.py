@@ -125,5 +125,3 @@ def _mat(m: np.ndarray) -> tuple[float, ...]:
     # moderngl expects column-major order; numpy is row-major.
     return tuple(float(x) for x in np.asarray(m, dtype=np.float64).T.ravel())
 
-
-mat_uniform = _mat
