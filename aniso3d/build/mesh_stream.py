@@ -47,6 +47,14 @@ from aniso3d.errors import InputError
 READ_FACES = 1 << 18
 
 
+def _check_finite(xyz: np.ndarray, path: Path) -> None:
+    if not np.all(np.isfinite(xyz)):
+        bad = int(np.count_nonzero(~np.isfinite(xyz.reshape(-1, 3)).all(axis=1)))
+        raise InputError(
+            f"mesh file '{path}' has {bad} vertices with NaN or Inf coordinates; repair or remove them before building"
+        )
+
+
 class TriangleSource:
     """Triangles with per-face material, read in runs of faces.
 
@@ -69,7 +77,7 @@ class TriangleSource:
         lo = np.full(3, np.inf)
         hi = np.full(3, -np.inf)
         for a in range(0, self.n_faces, READ_FACES):
-            t = self.read(a, min(self.n_faces, a + READ_FACES)).triangles.reshape(-1, 3)
+            t = self.read(a, min(self.n_faces, a + READ_FACES)).triangles.reshape(-1, 3)  # checked finite
             lo = np.minimum(lo, t.min(axis=0))
             hi = np.maximum(hi, t.max(axis=0))
         return np.stack([lo, hi])
@@ -168,9 +176,7 @@ class StlSource(TriangleSource):
         if len(rec) != stop - start:
             raise InputError(f"binary STL '{self.path}' ended early: it changed or was truncated while being read")
         tri = rec["corners"].astype(np.float64)
-        if not np.all(np.isfinite(tri)):
-            raise InputError(f"mesh '{self.name}' has vertices with NaN or Inf coordinates; "
-                             "repair or remove them before building")  # fmt: skip
+        _check_finite(tri, self.path)
         return TriangleChunk(tri, *_material(len(tri)))
 
 
@@ -283,7 +289,7 @@ class PlySource(TriangleSource):
     def _check_index(self, idx: np.ndarray) -> None:
         if len(idx) and (idx.min() < 0 or idx.max() >= self.n_vertices):
             raise InputError(
-                f"mesh '{self.name}' has faces indexing vertices outside 0..{self.n_vertices - 1} "
+                f"mesh file '{self.path}' has faces indexing vertices outside 0..{self.n_vertices - 1} "
                 f"(found {int(idx.min())}..{int(idx.max())}); the file is damaged"
             )
 
@@ -310,9 +316,7 @@ class PlySource(TriangleSource):
         used = verts[idx.ravel()]
         del verts
         xyz = np.stack([used["x"], used["y"], used["z"]], axis=-1).astype(np.float64).reshape(n, 3, 3)
-        if not np.all(np.isfinite(xyz)):
-            raise InputError(f"mesh '{self.name}' has vertices with NaN or Inf coordinates; "
-                             "repair or remove them before building")  # fmt: skip
+        _check_finite(xyz, self.path)
         kd = None
         if self.face_colours:
             kd = np.stack([rec[c] for c in _COLOURS], axis=1).astype(np.float64) / 255.0
@@ -335,6 +339,7 @@ class PlySource(TriangleSource):
             v = self._vertices(a, b)[used[a:b]]
             if len(v):
                 xyz = np.stack([v["x"], v["y"], v["z"]], axis=-1).astype(np.float64)
+                _check_finite(xyz, self.path)
                 lo = np.minimum(lo, xyz.min(axis=0))
                 hi = np.maximum(hi, xyz.max(axis=0))
         return np.stack([lo, hi])

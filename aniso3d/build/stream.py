@@ -415,8 +415,8 @@ class ExactTable:
 
     def __init__(self, width: int):
         self.width = width
-        # blocks of ~8 MB
-        self.shift = int(max(6, min(16, math.floor(math.log2(max(1, (8 << 20) // (16 * max(width, 1))))))))
+        # blocks of ~1 MB: small tables stay small, big ones take ~1 step per MB
+        self.shift = int(max(4, min(16, math.floor(math.log2(max(1, (1 << 20) // (16 * max(width, 1))))))))
         self.keys = np.zeros(0, dtype=np.int64)
         self.slots = np.zeros(0, dtype=np.int64)
         self.hi: list[np.ndarray] = []
@@ -783,6 +783,21 @@ def _run_dask(source, ranges, grid, dirs, batches, client, retries, report, seco
     for k, v in arrays.pop("seconds").items():
         seconds[k] = seconds.get(k, 0.0) + v
     return arrays
+
+
+def dask_workers(client) -> tuple[int, int | None]:
+    """(number of workers, smallest worker memory limit in bytes or None) of
+    a Dask client's cluster; a clear error if dask.distributed is missing."""
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        raise _missing_dask() from None
+    try:
+        info = client.scheduler_info()["workers"]
+    except (AttributeError, KeyError, TypeError):
+        raise InputError(f"client must be a dask.distributed.Client, got {type(client).__name__}") from None
+    limits = [w.get("memory_limit") or 0 for w in info.values()]
+    return max(1, len(info)), (min(limits) or None) if limits else None
 
 
 def _missing_dask() -> ResourceError:

@@ -388,22 +388,27 @@ def estimate_build_bytes(
 
 
 def _estimate_counts(mesh: Mesh, resolution: int, bounds: np.ndarray | None) -> tuple[float, int]:
-    """(expected sub-polygons, lower bound of occupied voxels) of ``mesh``."""
+    """(expected sub-polygons, lower bound of occupied voxels) of ``mesh``,
+    in batches of triangles (the working memory stays small)."""
     b = mesh.bounds if bounds is None else np.asarray(bounds, dtype=np.float64)
     grid = make_grid(b, resolution)
-    t = (mesh.triangles - grid.origin) / grid.voxel_size
-    ext = t.max(axis=1) - t.min(axis=1)
-    small = np.all(ext < 1.0, axis=1)
-    # a small triangle's expected number of cells; a large one's: its area
-    # times |n|_1 (cells a plane crosses per unit area) plus its perimeter
-    cross = np.cross(t[~small, 1] - t[~small, 0], t[~small, 2] - t[~small, 0])
-    perimeter = np.linalg.norm(t[~small] - np.roll(t[~small], 1, axis=1), axis=2).sum(axis=1)
-    subpolys = float(np.prod(1.0 + ext[small], axis=1).sum())
-    subpolys += float((0.5 * np.abs(cross).sum(axis=1) + perimeter + 1.0).sum())
-    cell = np.clip(np.floor(t.mean(axis=1)), 0, grid.shape - 1).astype(np.int64)
-    keys = np.sort(cell_keys(cell, grid.shape))
-    voxels = int(np.count_nonzero(np.diff(keys)) + 1) if len(keys) else 0
-    return subpolys, voxels
+    subpolys = 0.0
+    keys = []
+    for start in range(0, mesh.n_faces, CLIP_BATCH):
+        t = (mesh.vertices[mesh.faces[start:start + CLIP_BATCH]] - grid.origin) / grid.voxel_size
+        ext = t.max(axis=1) - t.min(axis=1)
+        small = np.all(ext < 1.0, axis=1)
+        # a small triangle's expected number of cells; a large one's: its area
+        # times |n|_1 (cells a plane crosses per unit area) plus its perimeter
+        big = t[~small]
+        cross = np.cross(big[:, 1] - big[:, 0], big[:, 2] - big[:, 0])
+        perimeter = np.linalg.norm(big - np.roll(big, 1, axis=1), axis=2).sum(axis=1)
+        subpolys += float(np.prod(1.0 + ext[small], axis=1).sum())
+        subpolys += float((0.5 * np.abs(cross).sum(axis=1) + perimeter + 1.0).sum())
+        cell = np.clip(np.floor(t.mean(axis=1)), 0, grid.shape - 1).astype(np.int64)
+        keys.append(np.unique(cell_keys(cell, grid.shape)))
+    keys = np.unique(np.concatenate(keys)) if keys else np.zeros(0, np.int64)
+    return subpolys, len(keys)
 
 
 def _build_bytes(n_faces: int, subpolys: float, voxels: float, directions: int) -> int:
@@ -550,14 +555,25 @@ def build_texture(
         )
     available = _available_memory()
     limit = memory_limit if memory_limit is not None else available
+    if client is not None:
+        # On a cluster the budget is each worker's (default: half its memory
+        # limit), and every worker should get several chunks.
+        workers, worker_memory = stream.dask_workers(client)
+        if memory_budget is None and worker_memory:
+            memory_budget = max(1, int(DEFAULT_BUDGET_SHARE * worker_memory))
     if memory_budget is None:
         base = limit if limit is not None else 2**33
         memory_budget = max(1, int(DEFAULT_BUDGET_SHARE * base))
-    size = chunk_size or plan_chunk_size(n, memory_budget, 1 if client is not None else workers)
-    size = min(size, n)
+    if chunk_size:
+        size = chunk_size
+    elif client is not None:
+        size = min(plan_chunk_size(n, memory_budget, 1), -(-n // (CHUNKS_PER_WORKER * workers)))
+    else:
+        size = plan_chunk_size(n, memory_budget, workers)
+    size = max(1, min(size, n))
     n_chunks = -(-n // size)
     executor = "dask" if client is not None else ("in process" if workers == 1 else "process pool")
-    stats.update(chunks=n_chunks, chunk_size=size, workers=workers, executor=executor,
+    stats.update(n_faces=n, chunks=n_chunks, chunk_size=size, workers=workers, executor=executor,
                  reader=source.note, memory_budget=memory_budget)  # fmt: skip
 
     if isinstance(source, MeshSource) and limit is not None:
