@@ -129,6 +129,22 @@ def test_exact_sums_against_python_integers():
     exact = [sum(round(float(t) * 2**84) for t in col) for col in x.T]  # Python ints
     for c in range(2):
         assert int(hi[0, c]) * 2**64 + int(lo[0, c]) == exact[c]
+    # the two-limb split of small values is the same integer
+    small = x[np.abs(x).max(axis=1) < stream.SMALL_VALUE]
+    two = stream._join2(*(np.add.reduceat(limb, [0], axis=0) for limb in stream._split2(small, stream.FRAC_BITS)))
+    three = stream._join3(*(np.add.reduceat(limb, [0], axis=0) for limb in stream._split3(small, stream.FRAC_BITS)))
+    assert np.array_equal(two[0], three[0]) and np.array_equal(two[1], three[1])
+
+
+def test_geometry_outside_the_bounds_sums_large_pieces_exactly(mesh):
+    # Bounds that cut the mesh: the outer cells take whole triangles, pieces of
+    # many voxel areas (the three-limb path); still chunk-independent, and the
+    # area is all there.
+    box = np.array([[-0.1, 1.0, -0.1], [0.1, 1.2, 0.1]])
+    a = build_texture(mesh, 8, 16, bounds=box)
+    assert a.entry_area.max() > stream.SMALL_VALUE
+    assert_same(build_texture(mesh, 8, 16, bounds=box, chunk_size=64), a)
+    assert a.total_area() == pytest.approx(mesh.area(), rel=1e-12)
 
 
 def test_chunked_build_holds_one_chunk_at_a_time():
