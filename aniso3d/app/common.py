@@ -68,7 +68,7 @@ class Progress:
         self._width = 0
 
     def __call__(self, fraction: float, stage: str = "") -> None:
-        if not self.enabled:
+        if not self.enabled or self._last >= 1.0:  # finished: the line is complete
             return
         fraction = min(max(fraction, 0.0), 1.0)
         if fraction < 1.0 and fraction - self._last < 0.01:

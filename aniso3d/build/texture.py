@@ -572,6 +572,8 @@ def build_texture(
         size = plan_chunk_size(n, memory_budget, workers)
     size = max(1, min(size, n))
     n_chunks = -(-n // size)
+    if client is None and n_chunks == 1:
+        workers = 1  # one chunk: a pool would only add its start-up
     executor = "dask" if client is not None else ("in process" if workers == 1 else "process pool")
     stats.update(n_faces=n, chunks=n_chunks, chunk_size=size, workers=workers, executor=executor,
                  reader=source.note, memory_budget=memory_budget)  # fmt: skip
@@ -582,19 +584,19 @@ def build_texture(
         if n_chunks == 1:
             need = _build_bytes(n, subpolys, voxels, K)
         else:
-            need = _stream_bytes(n, size, subpolys, voxels, K, workers)
+            need = _stream_bytes(size, voxels, voxels, K, workers)  # an entry per voxel at least
         _refuse_if_too_big(need, limit, resolution, K)
 
-    def check(n_sub: int, n_voxels: int) -> None:
-        # exact counts so far (all of them for a one-chunk build)
-        if n_chunks == 1:
+    def check(n_sub: int, n_voxels: int, n_entries: int | None = None) -> None:
+        # exact counts: of the whole build (one chunk), or so far (chunks)
+        if n_entries is None:
             need = _build_bytes(n, n_sub, n_voxels, K)
         else:
-            need = _stream_bytes(n, size, n_sub * n / max(1, size), n_voxels, K, workers)
+            need = _stream_bytes(size, n_voxels, n_entries, K, workers)
         _refuse_if_too_big(need, limit, resolution, K)
 
     def on_progress(done: int, extra: float, stage: str) -> None:
-        report(0.97 * min(1.0, (done + extra) / n), stage)
+        report(min(1.0, (done + extra) / n), stage)  # the share of the triangles done
 
     seconds: dict = {}
     t0 = time.perf_counter()
@@ -637,16 +639,14 @@ def build_texture(
     )
 
 
-def _stream_bytes(n_faces: int, chunk: int, subpolys: float, voxels: float, directions: int, workers: int) -> int:
+def _stream_bytes(chunk: int, voxels: float, entries: float, directions: int, workers: int) -> int:
     """Peak bytes of a build in chunks of ``chunk`` faces on ``workers``
-    workers: the running exact sums and the float texture at the end, plus
-    every worker's chunk."""
-    K = directions
-    entries = min(subpolys, voxels * K)
-    sums = 16.0 * voxels * K + 144.0 * entries
-    texture = 8.0 * voxels * K + 68.0 * entries
-    chunks = max(1, workers) * chunk * CHUNK_BYTES_PER_TRIANGLE
-    return int(1.2 * (sums + max(texture, chunks)))
+    workers with these counts: the exact sums (16 B per density value, ~210 B
+    per entry with its key; they turn into the texture block by block at the
+    end) and the chunks in flight (one more than the workers)."""
+    sums = 16.0 * voxels * (directions + 1) + 210.0 * entries
+    chunks = (max(1, workers) + 1) * chunk * CHUNK_BYTES_PER_TRIANGLE
+    return int(1.2 * (sums + chunks))
 
 
 def _available_memory() -> int | None:
