@@ -12,9 +12,9 @@ reads that file in a fresh subprocess:
 - chunked, 1 or 2 local workers: ``build_texture(path, workers=w,
   memory_budget=--budget)`` (the file read in chunks; 2 workers: a 'spawn'
   process pool);
-- Dask, 1 or 2 workers: the same on a ``LocalCluster(n_workers=w,
-  threads_per_worker=1, processes=True)`` made in the subprocess (its start-up
-  is timed apart, not in the build time).
+- Dask, 1 or 2 workers: the same on a ``LocalCluster`` of w worker processes
+  of one thread (:func:`aniso3d.build.stream.local_cluster`) made in the
+  subprocess (its start-up is timed apart, not in the build time).
 
 Time is the wall time of the build call (load included for the one pass);
 CPU is the user + system seconds of the contender's process and every child
@@ -90,10 +90,12 @@ def contender(name: str, path: str, budget: int, out: str) -> dict:
         tex = build_texture(path, 128, 16, workers=workers, memory_budget=budget, timings=timings, stats=stats)
         res["seconds"] = time.perf_counter() - t0
     else:
-        from distributed import Client, LocalCluster
+        from distributed import Client
+
+        from aniso3d.build.stream import local_cluster
 
         t0 = time.perf_counter()
-        with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as c:
+        with local_cluster(workers) as c:
             with Client(c) as client:
                 res["cluster_start_s"] = time.perf_counter() - t0
                 t0 = time.perf_counter()

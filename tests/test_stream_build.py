@@ -290,9 +290,9 @@ def test_missing_dask_is_one_clear_error(files, tmp_path, capsys, monkeypatch):
 @pytest.fixture(scope="module")
 def client():
     distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as c:
-        with distributed.Client(c) as cl:
-            yield cl
+    with stream.local_cluster(2) as c, distributed.Client(c) as cl:
+        assert c.workers and all(w.process.is_alive() for w in c.workers.values())  # processes, not threads
+        yield cl
 
 
 def test_dask_build_equals_the_local_build(client, mesh, one_pass, files):

@@ -119,15 +119,16 @@ def _executor(args):
         yield None
         return
     try:
-        from distributed import Client, LocalCluster
+        from distributed import Client
     except ImportError:
         raise ResourceError(
             "--scheduler needs dask.distributed, which is not installed; "
             "install it with: pip install 'aniso3d[cluster]'"
         ) from None
     if args.scheduler == "local":
-        with LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
-                          dashboard_address=None) as cluster, Client(cluster) as client:  # fmt: skip
+        from aniso3d.build.stream import local_cluster
+
+        with local_cluster(args.workers) as cluster, Client(cluster) as client:
             yield client
         return
     try:
