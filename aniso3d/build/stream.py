@@ -820,11 +820,16 @@ def _run_dask(source, ranges, grid, dirs, batches, client, retries, report, seco
             for i in range(0, len(level), FAN_IN)
         ]  # fmt: skip
     final = client.submit(finalize_partial, level[0], grid, len(dirs), retries=retries, pure=False)
+    # Hold no future but the last: a result the client still references stays
+    # in a worker's memory after its merge has used it.
+    del level
+    pending = as_completed(futures)
+    futures.clear()
     done = 0
-    for f in as_completed(futures):
+    for f in pending:
         done += sizes[f.key]
         report(done, 0.0, "register")
-    del futures
+        del f
     t0 = time.perf_counter()
     arrays = final.result()
     seconds["finish"] = seconds.get("finish", 0.0) + time.perf_counter() - t0
