@@ -358,8 +358,9 @@ CLIP_BATCH = stream.CLIP_BATCH
 #: Sub-polygons registered per batch (rows of the S x K direction products).
 REGISTER_BATCH = stream.REGISTER_BATCH
 #: Working memory of a chunk per triangle, bytes: the triangles, the clipper
-#: and the chunk's exact sums, measured on trees (~3.5 sub-polygons per
-#: triangle at 128^3). Chunk sizes follow from it and the memory budget.
+#: and the chunk's exact sums. Workers measured ~650 on trees at 128^3 (~3.5
+#: sub-polygons per triangle, docs/scale.md); this leaves room for meshes
+#: that cut into more pieces. Chunk sizes follow from it and the budget.
 CHUNK_BYTES_PER_TRIANGLE = 1200
 #: Share of the available memory a build plans to use when no budget is given.
 DEFAULT_BUDGET_SHARE = 0.5
