@@ -335,7 +335,7 @@ def test_build_that_cannot_fit_is_refused_up_front(tmp_path, capsys, monkeypatch
     def must_not_clip(*a, **k):
         raise AssertionError("clipping started on a build that cannot fit")
 
-    monkeypatch.setattr(aniso3d.build.texture, "clip_to_grid", must_not_clip)
+    monkeypatch.setattr(aniso3d.build.stream, "clip_to_grid", must_not_clip)
     out = tmp_path / "tree.a3d"
     t0 = time.perf_counter()
     code, stdout, err = run(["build", "-o", out, "-r", 256, "-k", 4096, "-q"], capsys)

@@ -49,32 +49,49 @@ def image_size(text: str) -> tuple[int, int]:
 
 class Progress:
     """A one-line progress bar on stderr (silent when stderr is not a terminal
-    unless forced), for long builds and frame sequences."""
+    unless forced), for long builds and frame sequences.
 
-    def __init__(self, label: str, enabled: bool | None = None, stream=None):
+    With ``total``, the line also shows how many of the ``unit`` (e.g.
+    triangles) are done, reading the fraction as that share of the total, and
+    the time left at the rate so far.
+    """
+
+    def __init__(self, label: str, enabled: bool | None = None, stream=None, total: int | None = None,
+                 unit: str = "triangles"):  # fmt: skip
         self.stream = stream or sys.stderr
         self.enabled = self.stream.isatty() if enabled is None else enabled
         self.label = label
+        self.total = total
+        self.unit = unit
         self.t0 = time.perf_counter()
         self._last = -1.0
+        self._width = 0
 
     def __call__(self, fraction: float, stage: str = "") -> None:
-        if not self.enabled:
+        if not self.enabled or self._last >= 1.0:  # finished: the line is complete
             return
         fraction = min(max(fraction, 0.0), 1.0)
         if fraction < 1.0 and fraction - self._last < 0.01:
             return
         self._last = fraction
-        width = 30
-        filled = int(round(width * fraction))
-        elapsed = time.perf_counter() - self.t0
-        self.stream.write(
-            f"\r{self.label} [{'#' * filled}{'.' * (width - filled)}] {100 * fraction:5.1f}% "
-            f"{stage:<10} {elapsed:6.1f}s"
-        )
+        self.stream.write("\r" + self.line(fraction, stage, time.perf_counter() - self.t0))
         if fraction >= 1.0:
             self.stream.write("\n")
         self.stream.flush()
+
+    def line(self, fraction: float, stage: str, elapsed: float) -> str:
+        """The bar at ``fraction`` done after ``elapsed`` seconds."""
+        width = 30
+        filled = int(round(width * fraction))
+        text = f"{self.label} [{'#' * filled}{'.' * (width - filled)}] {100 * fraction:5.1f}% "
+        if self.total:
+            text += f"{int(round(fraction * self.total)):,}/{self.total:,} {self.unit} "
+        text += f"{stage:<10} {elapsed:6.1f}s"
+        if 0.0 < fraction < 1.0 and elapsed > 0.0:
+            text += f", ~{elapsed * (1.0 - fraction) / fraction:.0f}s left"
+        # pad over the end of a longer previous line
+        self._width, pad = max(self._width, len(text)), self._width - len(text)
+        return text + " " * max(0, pad)
 
 
 def add_point_cloud_options(p: argparse.ArgumentParser) -> None:
@@ -133,6 +150,19 @@ def ply_is_point_cloud(path: str) -> bool:
     from aniso3d.build.ply import read_ply_header
 
     return read_ply_header(check_readable_file(path, "input")).is_point_cloud
+
+
+def byte_size(text: str) -> int:
+    """'2G', '512M', '1.5GiB', '800000' -> bytes (K, M, G, T: powers of 1024)."""
+    t = text.strip().upper().removesuffix("IB").removesuffix("B")
+    scale = {"K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40}.get(t[-1:], 1)
+    try:
+        value = float(t[:-1] if scale > 1 else t) * scale
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a size such as 2G, 512M or 800000, got '{text}'") from None
+    if not (value >= 1 and value < float("inf")):
+        raise argparse.ArgumentTypeError(f"a memory size must be at least 1 byte, got '{text}'")
+    return int(value)
 
 
 def format_bytes(n: float) -> str:

@@ -34,13 +34,14 @@ from pathlib import Path
 import numpy as np
 import psutil
 
-from aniso3d.build.clip import Grid, clip_to_grid, make_grid, triangle_normals
+from aniso3d.build import stream
+from aniso3d.build.clip import Grid, make_grid
 from aniso3d.build.encoding import ARRAYS, DEFAULT_BITS, Bits, decode, encode
 from aniso3d.build.mesh import Mesh
 from aniso3d.build.points import PointCloud
 from aniso3d.build.texture_file import encoded_size, read_texture_file, write_texture_file
 from aniso3d.errors import FormatError, InputError
-from aniso3d.grid import cell_coords, cell_keys, ranges, tangent_frame, weighted_means
+from aniso3d.grid import cell_keys, ranges, tangent_frame
 
 #: Defaults chosen by measurement (docs/bench/report.md): K = 16 is as
 #: accurate as 64 or 256 for the volume and splat renderers (both read the
@@ -383,17 +384,29 @@ def _spread(nrm: np.ndarray, area: np.ndarray, counts: np.ndarray, h: float) -> 
 # ------------------------------------------------------------------- registration
 
 #: Triangles clipped per batch: bounds the clipper's working memory (~ a few
-#: hundred MB at most) whatever the mesh size.
-CLIP_BATCH = 65536
+#: hundred MB at most) whatever the chunk size.
+CLIP_BATCH = stream.CLIP_BATCH
 #: Sub-polygons registered per batch (rows of the S x K direction products).
-REGISTER_BATCH = 32768
+REGISTER_BATCH = stream.REGISTER_BATCH
+#: Working memory of a chunk per triangle, bytes: the triangles, the clipper
+#: and the chunk's exact sums. Workers measured ~650 on trees at 128^3 (~3.5
+#: sub-polygons per triangle, docs/scale.md); this leaves room for meshes
+#: that cut into more pieces. Chunk sizes follow from it and the budget.
+CHUNK_BYTES_PER_TRIANGLE = 1200
+#: Share of the available memory a build plans to use when no budget is given.
+DEFAULT_BUDGET_SHARE = 0.5
+#: Most triangles in one chunk when no chunk size is given: larger chunks
+#: save no time (docs/scale.md), only memory.
+MAX_CHUNK = 1 << 18
+#: Chunks per worker at least, so that workers finish together.
+CHUNKS_PER_WORKER = 4
 
 
 def estimate_build_bytes(
     mesh: Mesh, resolution: int, directions: int, bounds: np.ndarray | None = None
 ) -> int:
-    """Peak memory of a build (and of turning it into points), estimated from
-    what is known before clipping, in bytes.
+    """Peak memory of a one-chunk build (and of turning it into points),
+    estimated from what is known before clipping, in bytes.
 
     Sub-polygons are estimated from each triangle's extent in voxels (within
     ~30% on trees, spheres and boxes); occupied voxels are counted as the
@@ -402,27 +415,38 @@ def estimate_build_bytes(
     :func:`build_texture` checks again with the exact counts once clipping has
     found them, before the large allocations (density, registration).
     """
-    b = mesh.bounds if bounds is None else np.asarray(bounds, dtype=np.float64)
-    grid = make_grid(b, resolution)
-    t = (mesh.triangles - grid.origin) / grid.voxel_size
-    ext = t.max(axis=1) - t.min(axis=1)
-    small = np.all(ext < 1.0, axis=1)
-    # a small triangle's expected number of cells; a large one's: its area
-    # times |n|_1 (cells a plane crosses per unit area) plus its perimeter
-    cross = np.cross(t[~small, 1] - t[~small, 0], t[~small, 2] - t[~small, 0])
-    perimeter = np.linalg.norm(t[~small] - np.roll(t[~small], 1, axis=1), axis=2).sum(axis=1)
-    subpolys = float(np.prod(1.0 + ext[small], axis=1).sum())
-    subpolys += float((0.5 * np.abs(cross).sum(axis=1) + perimeter + 1.0).sum())
-    cell = np.clip(np.floor(t.mean(axis=1)), 0, grid.shape - 1).astype(np.int64)
-    keys = np.sort(cell_keys(cell, grid.shape))
-    voxels = int(np.count_nonzero(np.diff(keys)) + 1) if len(keys) else 0
+    subpolys, voxels = _estimate_counts(mesh, resolution, bounds)
     return _build_bytes(mesh.n_faces, subpolys, voxels, directions)
 
 
+def _estimate_counts(mesh: Mesh, resolution: int, bounds: np.ndarray | None) -> tuple[float, int]:
+    """(expected sub-polygons, lower bound of occupied voxels) of ``mesh``,
+    in batches of triangles (the working memory stays small)."""
+    b = mesh.bounds if bounds is None else np.asarray(bounds, dtype=np.float64)
+    grid = make_grid(b, resolution)
+    subpolys = 0.0
+    keys = []
+    for start in range(0, mesh.n_faces, CLIP_BATCH):
+        t = (mesh.vertices[mesh.faces[start:start + CLIP_BATCH]] - grid.origin) / grid.voxel_size
+        ext = t.max(axis=1) - t.min(axis=1)
+        small = np.all(ext < 1.0, axis=1)
+        # a small triangle's expected number of cells; a large one's: its area
+        # times |n|_1 (cells a plane crosses per unit area) plus its perimeter
+        big = t[~small]
+        cross = np.cross(big[:, 1] - big[:, 0], big[:, 2] - big[:, 0])
+        perimeter = np.linalg.norm(big - np.roll(big, 1, axis=1), axis=2).sum(axis=1)
+        subpolys += float(np.prod(1.0 + ext[small], axis=1).sum())
+        subpolys += float((0.5 * np.abs(cross).sum(axis=1) + perimeter + 1.0).sum())
+        cell = np.clip(np.floor(t.mean(axis=1)), 0, grid.shape - 1).astype(np.int64)
+        keys.append(np.unique(cell_keys(cell, grid.shape)))
+    keys = np.unique(np.concatenate(keys)) if keys else np.zeros(0, np.int64)
+    return subpolys, len(keys)
+
+
 def _build_bytes(n_faces: int, subpolys: float, voxels: float, directions: int) -> int:
-    """Peak bytes of the build's stages (and of ``to_points``) for these
-    counts: 1.05 to 1.9 times the real peak measured with tracemalloc on
-    trees, spheres, boxes and triangle soups (tests/test_bad_input.py)."""
+    """Peak bytes of a one-chunk build's stages (and of ``to_points``) for
+    these counts, checked against the real peak measured with tracemalloc on
+    trees, spheres and boxes (tests/test_bad_input.py)."""
     K = directions
     entries = min(subpolys, voxels * K)
     mesh = 200.0 * n_faces  # triangles in world and grid units, normals
@@ -430,12 +454,14 @@ def _build_bytes(n_faces: int, subpolys: float, voxels: float, directions: int) 
     # clipper's working arrays, ~1.5 kB per piece of the largest batch
     batch_pieces = subpolys * min(1.0, CLIP_BATCH / max(n_faces, 1))
     clip = mesh + 128.0 * subpolys + 1500.0 * batch_pieces
-    # registration: sorted sub-polygon arrays, the density spheres, the batch
-    # of S x K products (three arrays), the entries' sums; points after it
-    register = (mesh + 300.0 * subpolys + 8.0 * voxels * K
-                + 24.0 * min(subpolys, REGISTER_BATCH) * K + 200.0 * entries)  # fmt: skip
+    # registration: sorted sub-polygon arrays, the exact density sums (16 B a
+    # value) and a batch of limbs, the entries' exact sums (144 B each)
+    register = (mesh + 300.0 * subpolys + 16.0 * voxels * K
+                + 40.0 * min(subpolys * K, stream.BATCH_VALUES) + 200.0 * entries)  # fmt: skip
+    # finishing: the exact sums and the float texture side by side
+    finish = 24.0 * voxels * K + 220.0 * entries
     points = 8.0 * voxels * K + 20.0 * voxels + 270.0 * entries
-    return int(1.2 * max(clip, register, points))
+    return int(1.2 * max(clip, register, finish, points))
 
 
 def _refuse_if_too_big(need: int, limit: int | None, resolution: int, directions: int) -> None:
@@ -451,8 +477,28 @@ def _gib(n: float) -> str:
     return f"{n / 2**30:.1f} GiB" if n >= 2**30 else f"{n / 2**30:.2g} GiB"
 
 
+def plan_chunk_size(n_faces: int, memory_budget: int, workers: int = 1) -> int:
+    """Triangles per chunk for a build of ``n_faces`` faces on ``workers``
+    workers within ``memory_budget`` bytes: each worker's chunk gets an equal
+    share of the budget, one share kept for the running sums; at most
+    :data:`MAX_CHUNK`, and small enough that every worker gets
+    :data:`CHUNKS_PER_WORKER` chunks."""
+    per_chunk = int(memory_budget) // ((max(1, workers) + 1) * CHUNK_BYTES_PER_TRIANGLE)
+    size = min(max(1, per_chunk), MAX_CHUNK)
+    if workers > 1:
+        size = min(size, -(-n_faces // (CHUNKS_PER_WORKER * workers)))
+    return max(1, min(size, n_faces))
+
+
+def _whole_int(value, what: str, minimum: int = 1) -> int:
+    number = isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+    if not number or value < minimum:
+        raise InputError(f"{what} must be a whole number >= {minimum}, got {value!r}")
+    return int(value)
+
+
 def build_texture(
-    mesh: Mesh,
+    mesh: Mesh | str | os.PathLike | list,
     resolution: int = DEFAULT_RESOLUTION,
     directions: int = DEFAULT_DIRECTIONS,
     *,
@@ -462,140 +508,177 @@ def build_texture(
     progress=None,
     timings: dict | None = None,
     memory_limit: int | None = None,
+    memory_budget: int | None = None,
+    chunk_size: int | None = None,
+    workers: int = 1,
+    client=None,
+    retries: int = 2,
+    stats: dict | None = None,
 ) -> AnisoTexture:
-    """Build the anisotropic 3D texture of ``mesh``.
+    """Build the anisotropic 3D texture of a mesh, streaming its triangles in
+    chunks, optionally in parallel.
+
+    Every facet contribution is summed exactly (fixed point, see
+    :mod:`aniso3d.build.stream`), so the texture is the same bit for bit
+    whatever the chunk size, the number of workers or the executor.
 
     Args:
+        mesh: a :class:`Mesh`, a mesh file path (binary STL and binary PLY of
+            triangles are read in chunks, other formats loaded whole), a
+            :class:`~aniso3d.build.mesh_stream.TriangleSource`, or a list of
+            these, built as one mesh.
         resolution: voxels along the longest axis of ``bounds`` (the paper: 128).
         directions: K, sample directions shared by density and shading spheres.
         direction_set: "fibonacci" (deterministic, default) or "random" (seeded).
-        bounds: (2, 3) world box to grid; the mesh's bounds by default. Pass the
-            same bounds to textures that must share a grid.
-        progress: optional callable ``progress(fraction, stage)`` for long builds.
-        timings: optional dict that receives seconds per stage.
-        memory_limit: bytes; a build estimated above it is refused up front.
+        bounds: (2, 3) world box to grid; the mesh's bounds by default (for a
+            path, found by a first pass over the file). Pass the same bounds
+            to textures that must share a grid.
+        progress: optional callable ``progress(fraction, stage)``; the
+            fraction is of the triangles done.
+        timings: optional dict that receives seconds per stage (clip and
+            register summed over workers; bounds, read, merge, finish).
+        memory_limit: bytes; a build estimated above it is refused (up front
+            for a mesh in memory, else as soon as the counts say so).
             Default: the machine's available memory.
+        memory_budget: bytes the build plans to use; chunk sizes follow from
+            it (:func:`plan_chunk_size`). Default: half the available memory.
+        chunk_size: triangles per chunk, overriding the budget's choice.
+        workers: local worker processes (started with 'spawn'); 1 builds in
+            this process.
+        client: a ``dask.distributed.Client``: chunks run on its workers
+            (which read a path themselves, so it must be visible to them) and
+            are reduced there by a tree of merges.
+        retries: times Dask retries a failed task (a dead worker's tasks are
+            recomputed anyway).
+        stats: optional dict that receives how the build ran (chunks,
+            chunk size, workers, executor, reader).
     """
-    if not isinstance(mesh, Mesh):
-        raise InputError(f"build_texture needs an aniso3d.Mesh, got {type(mesh).__name__}")
+    from aniso3d.build.mesh_stream import MeshSource, open_source
+
     dirs = sphere_directions(directions, direction_set, seed)
-    if bounds is None:
-        bounds = mesh.bounds
-    grid = make_grid(np.asarray(bounds, dtype=np.float64), resolution)
-    limit = memory_limit if memory_limit is not None else _available_memory()
-    need = estimate_build_bytes(mesh, resolution, len(dirs), bounds)
-    _refuse_if_too_big(need, limit, resolution, len(dirs))
+    K = len(dirs)
+    workers = _whole_int(workers, "workers")
+    retries = _whole_int(retries, "retries", 0)
+    if chunk_size is not None:
+        chunk_size = _whole_int(chunk_size, "chunk size")
+    if memory_budget is not None:
+        memory_budget = _whole_int(memory_budget, "memory budget")
     timings = {} if timings is None else timings
+    stats = {} if stats is None else stats
     report = progress or (lambda fraction, stage: None)
 
-    # ---- clip, in batches of triangles
     t0 = time.perf_counter()
-    # Triangles relative to their first vertex, in units of h, plus that
-    # vertex's grid position: keeps tiny triangles exact in shape anywhere.
-    world = mesh.triangles
-    first = grid.to_grid(world[:, 0])
-    tri = (world - world[:, :1]) / grid.voxel_size
-    normals, _ = triangle_normals(tri)
-    pieces = []
-    n = len(tri)
-    for start in range(0, n, CLIP_BATCH):
-        stop = min(n, start + CLIP_BATCH)
-        pieces.append(
-            clip_to_grid(
-                tri[start:stop], normals[start:stop], grid.shape, np.arange(start, stop),
-                first=first[start:stop],
-            )  # fmt: skip
+    source = open_source(mesh)
+    if source.note.startswith("loaded whole"):
+        timings["load"] = time.perf_counter() - t0
+    n = source.n_faces
+    if n == 0:
+        raise InputError(f"mesh '{source.name}' has no faces: nothing to build")
+    if bounds is None:
+        t0 = time.perf_counter()
+        bounds = source.bounds()
+        if not isinstance(source, MeshSource):
+            timings["bounds"] = time.perf_counter() - t0
+    grid = make_grid(np.asarray(bounds, dtype=np.float64), resolution)
+    if float(np.prod(grid.shape.astype(np.float64))) * K >= 2.0**62:
+        raise InputError(
+            f"a {'x'.join(str(int(s)) for s in grid.shape)} grid with {K} directions has too many "
+            "(voxel, direction) pairs to key; lower --resolution or --directions"
         )
-        report(0.6 * stop / n, "clip")
-    face = np.concatenate([p.face for p in pieces])
-    cell = np.concatenate([p.cell for p in pieces])
-    S = np.concatenate([p.area for p in pieces])
-    centroid = np.concatenate([p.centroid for p in pieces])
-    del pieces
-    timings["clip"] = time.perf_counter() - t0
-    n_sub = len(S)
+    available = _available_memory()
+    limit = memory_limit if memory_limit is not None else available
+    if client is not None:
+        # On a cluster the budget is each worker's (default: half its memory
+        # limit), and every worker should get several chunks.
+        workers, worker_memory = stream.dask_workers(client)
+        if memory_budget is None and worker_memory:
+            memory_budget = max(1, int(DEFAULT_BUDGET_SHARE * worker_memory))
+    if memory_budget is None:
+        base = limit if limit is not None else 2**33
+        memory_budget = max(1, int(DEFAULT_BUDGET_SHARE * base))
+    if chunk_size:
+        size = chunk_size
+    elif client is not None:
+        size = min(plan_chunk_size(n, memory_budget, 1), -(-n // (CHUNKS_PER_WORKER * workers)))
+    else:
+        size = plan_chunk_size(n, memory_budget, workers)
+    size = max(1, min(size, n))
+    n_chunks = -(-n // size)
+    if client is None and n_chunks == 1:
+        workers = 1  # one chunk: a pool would only add its start-up
+    executor = "dask" if client is not None else ("in process" if workers == 1 else "process pool")
+    stats.update(n_faces=n, chunks=n_chunks, chunk_size=size, workers=workers, executor=executor,
+                 reader=source.note, memory_budget=memory_budget)  # fmt: skip
 
-    # ---- register
+    if isinstance(source, MeshSource) and limit is not None:
+        # Refuse up front what could never fit: the counts are lower bounds.
+        subpolys, voxels = _estimate_counts(source.mesh, resolution, bounds)
+        if n_chunks == 1:
+            need = _build_bytes(n, subpolys, voxels, K)
+        else:
+            need = _stream_bytes(size, voxels, voxels, K, workers)  # an entry per voxel at least
+        _refuse_if_too_big(need, limit, resolution, K)
+
+    def check(n_sub: int, n_voxels: int, n_entries: int | None = None) -> None:
+        # exact counts: of the whole build (one chunk), or so far (chunks)
+        if n_entries is None:
+            need = _build_bytes(n, n_sub, n_voxels, K)
+        else:
+            need = _stream_bytes(size, n_voxels, n_entries, K, workers)
+        _refuse_if_too_big(need, limit, resolution, K)
+
+    def on_progress(done: int, extra: float, stage: str) -> None:
+        report(min(1.0, (done + extra) / n), stage)  # the share of the triangles done
+
+    seconds: dict = {}
     t0 = time.perf_counter()
-    key = cell_keys(cell, grid.shape)
-    order = np.argsort(key, kind="stable")
-    key, face, S, centroid = key[order], face[order], S[order], centroid[order]
-    # The exact counts are known now: check again before the large arrays.
-    n_voxels = int(np.count_nonzero(np.diff(key)) + 1) if n_sub else 0
-    need = _build_bytes(mesh.n_faces, n_sub, n_voxels, len(dirs))
-    _refuse_if_too_big(need, limit, resolution, len(dirs))
-    N = normals[face]
-    vox_keys, vox_start = np.unique(key, return_index=True)
-    M, K = len(vox_keys), len(dirs)
-    voxel_of = np.repeat(np.arange(M), np.diff(np.append(vox_start, n_sub)))
-    density = np.zeros((M, K))
-    nearest = np.empty(n_sub, dtype=np.int64)
-    # Batches end on voxel boundaries so reduceat never splits a voxel.
-    bounds_idx = _batch_bounds(vox_start, n_sub, REGISTER_BATCH)
-    for b0, b1 in zip(bounds_idx[:-1], bounds_idx[1:], strict=True):
-        r0, r1 = vox_start[b0], (vox_start[b1] if b1 < M else n_sub)
-        dots = N[r0:r1] @ dirs.T
-        nearest[r0:r1] = np.argmax(dots, axis=1)
-        contrib = np.abs(dots) * S[r0:r1, None]
-        density[b0:b1] = np.add.reduceat(contrib, vox_start[b0:b1] - r0, axis=0)
-        report(0.6 + 0.3 * r1 / max(n_sub, 1), "register")
-
-    # Shading entries: one per (voxel, nearest sample) pair; sorted by voxel.
-    ekey = voxel_of * K + nearest
-    ekeys, einv = np.unique(ekey, return_inverse=True)
-    E = len(ekeys)
-    e_area = np.bincount(einv, weights=S, minlength=E)
-
-    def wmean(values: np.ndarray) -> np.ndarray:
-        return weighted_means(einv, S, values, e_area)
-
-    e_kd = wmean(mesh.kd[face].astype(np.float64))
-    e_ks = wmean(mesh.ks[face].astype(np.float64))
-    e_sh = wmean(mesh.shininess[face].astype(np.float64))
-    e_cent = grid.origin + wmean(centroid) * grid.voxel_size
-    e_norm = wmean(N)
-    e_voxel = ekeys // K
-    offsets = np.zeros(M + 1, dtype=np.int64)
-    offsets[1:] = np.cumsum(np.bincount(e_voxel, minlength=M))
-    coords = cell_coords(vox_keys, grid.shape)
-    timings["register"] = time.perf_counter() - t0
+    arrays = stream.run_chunks(
+        source, grid, dirs, size, workers=workers, client=client, retries=retries,
+        report=on_progress, check=check if limit is not None and client is None else None,
+        seconds=seconds, batches=(CLIP_BATCH, REGISTER_BATCH),
+    )  # fmt: skip
+    timings.update(seconds)
+    timings.setdefault("clip", 0.0)
+    timings.setdefault("register", 0.0)
+    stats["seconds"] = time.perf_counter() - t0
     report(1.0, "register")
 
+    n_vertices = getattr(source, "n_vertices", 3 * n)
     return AnisoTexture(
         origin=grid.origin,
         voxel_size=grid.voxel_size,
         shape=np.asarray(grid.shape, dtype=np.int64),
-        coords=coords.astype(np.int32),
+        coords=arrays["coords"],
         directions=dirs,
-        density=density,
-        entry_offsets=offsets,
-        entry_direction=(ekeys % K).astype(np.int32),
-        entry_area=e_area,
-        entry_kd=e_kd.astype(np.float32),
-        entry_ks=e_ks.astype(np.float32),
-        entry_shininess=e_sh.astype(np.float32),
-        entry_centroid=e_cent,
-        entry_normal=e_norm.astype(np.float32),
+        density=arrays["density"],
+        entry_offsets=arrays["entry_offsets"],
+        entry_direction=arrays["entry_direction"],
+        entry_area=arrays["entry_area"],
+        entry_kd=arrays["entry_kd"],
+        entry_ks=arrays["entry_ks"],
+        entry_shininess=arrays["entry_shininess"],
+        entry_centroid=arrays["entry_centroid"],
+        entry_normal=arrays["entry_normal"],
         meta={
             "direction_set": direction_set,
             "seed": int(seed),
-            "source": mesh.name,
-            "n_triangles": int(mesh.n_faces),
-            "n_subpolygons": int(n_sub),
-            "mesh_area": float(mesh.area()),
-            "mesh_nbytes": int(mesh.nbytes),
+            "source": source.name,
+            "n_triangles": int(arrays["n_triangles"]),
+            "n_subpolygons": int(arrays["n_subpolygons"]),
+            "mesh_area": float(arrays["mesh_area"]),
+            "mesh_nbytes": int(n_vertices * 12 + n * 32),
         },
     )
 
 
-def _batch_bounds(starts: np.ndarray, total: int, batch: int) -> list[int]:
-    """Voxel indices that split rows into batches of about ``batch`` rows."""
-    M = len(starts)
-    if M == 0:
-        return [0]
-    cuts = np.searchsorted(starts, np.arange(batch, total, batch), side="right") - 1
-    cuts = np.unique(np.concatenate([[0], cuts[cuts > 0], [M]]))
-    return [int(c) for c in cuts]
+def _stream_bytes(chunk: int, voxels: float, entries: float, directions: int, workers: int) -> int:
+    """Peak bytes of a build in chunks of ``chunk`` faces on ``workers``
+    workers with these counts: the exact sums (16 B per density value, ~210 B
+    per entry with its key; they turn into the texture block by block at the
+    end) and the chunks in flight (one more than the workers)."""
+    sums = 16.0 * voxels * (directions + 1) + 210.0 * entries
+    chunks = (max(1, workers) + 1) * chunk * CHUNK_BYTES_PER_TRIANGLE
+    return int(1.2 * (sums + chunks))
 
 
 def _available_memory() -> int | None:
