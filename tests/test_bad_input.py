@@ -497,13 +497,18 @@ def test_new_outputs_get_normal_permissions_and_replacements_keep_theirs(
         os.umask(umask)
 
 
+# The writer stalls in short sleeps, not one long one: a signal sent to the
+# process may be taken by any of its threads (numpy's BLAS starts some), and
+# then the main thread sees it only when it next runs Python code; a single
+# sleep(60) would hide the signal for a minute, like no real write does.
 SLOW_WRITER = r"""
 import sys, time, numpy
 real = numpy.save
 def slow(*a, **k):
     real(*a, **k)
     print("WRITING", flush=True)
-    time.sleep(60)
+    for _ in range(600):
+        time.sleep(0.1)
 numpy.save = slow
 from aniso3d.app.cli import main
 sys.exit(main(sys.argv[1:]))
