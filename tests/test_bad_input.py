@@ -501,8 +501,12 @@ def test_new_outputs_get_normal_permissions_and_replacements_keep_theirs(
 # process may be taken by any of its threads (numpy's BLAS starts some), and
 # then the main thread sees it only when it next runs Python code; a single
 # sleep(60) would hide the signal for a minute, like no real write does.
+# It also restores Ctrl-C's handler: a test run started in the background
+# (CI scripts, nohup) ignores SIGINT, its children inherit that, and Python
+# then leaves SIGINT ignored, as a user's interactive terminal never does.
 SLOW_WRITER = r"""
-import sys, time, numpy
+import signal, sys, time, numpy
+signal.signal(signal.SIGINT, signal.default_int_handler)
 real = numpy.save
 def slow(*a, **k):
     real(*a, **k)
