@@ -168,3 +168,13 @@ def test_every_module_has_a_docstring():
         if p.stat().st_size and ast.get_docstring(ast.parse(p.read_text())) is None
     ]
     assert not missing, "modules without a docstring saying what they hold: " + ", ".join(missing)
+
+
+def test_every_subpackage_ships_in_the_wheel():
+    """pyproject.toml lists packages by hand; a new subpackage left out of the
+    list would be missing from the wheel while every test here still passed."""
+    import tomllib
+
+    listed = set(tomllib.loads((PACKAGE.parent / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    found = {module_name(p) for p in PACKAGE.rglob("__init__.py")}
+    assert found <= listed, f"subpackages missing from pyproject.toml's packages: {sorted(found - listed)}"
