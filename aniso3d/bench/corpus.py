@@ -14,7 +14,7 @@ resolution and K:
 - per camera and renderer (:data:`RENDERERS`): PSNR, SSIM and FLIP against
   the polygon truth supersampled ``gt_ssaa`` x ``gt_ssaa``, inside the box the
   object's bounds project to, and the frame time (median, fastest and slowest
-  of several frames through ``Renderer.render_frame``,
+  of several frames as ``Renderer.last_frame_seconds`` times them,
   :func:`~aniso3d.bench.run.measure`);
 - **flicker** on a turntable at the minified distance (:func:`flicker`);
 - the **targets** (:data:`TARGETS`), pass or fail per scene.

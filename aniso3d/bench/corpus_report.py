@@ -151,7 +151,7 @@ def corpus_markdown(result: CorpusResult, command: str) -> str:
         f"- preset **{m['preset']}**: {w}x{h} images; polygon truth at {m['gt_ssaa']}x{m['gt_ssaa']} samples per "
         f"pixel; texture {st['resolution']}^3, K = {st['directions']}; {st['splat']} splats; frame times are the "
         f"median [fastest-slowest] of {st['frames']} frames after {st['warmup']} warm-up, through "
-        f"`Renderer.render_frame` (draw and read back); turntable of {st['turntable']} frames.",
+        f"`Renderer.last_frame_seconds` (draw and read back); turntable of {st['turntable']} frames.",
         f"- code: git commit {commit}; {m['date']}; {m['seconds'] / 60:.1f} min.",
         f"- machine: {m.get('cpu_model') or m.get('machine')}, {gl.get('renderer', '?')} "
         f"({gl.get('backend', '?')}); {_load(m)}. Frame times on a loaded machine are slower and noisier "

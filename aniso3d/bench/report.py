@@ -183,7 +183,7 @@ def section_setup(v: _View) -> list[str]:
     return [
         f"Scene: {meta['triangles']:,} triangles. Ground truth: the polygon model at "
         f"{meta['gt_ssaa']}x{meta['gt_ssaa']} samples per pixel, same camera, lights and image size. "
-        "Frame time: draw plus read-back as `Renderer.render_frame` reports it (`Frame.seconds`) (supersampled "
+        "Frame time: draw plus read-back as `Renderer.last_frame_seconds` reports it (supersampled "
         "rows: their down-filtering on the CPU is in `frame_wall_s` only). Frame times are "
         "wall-clock and include any contention from other processes. Less affected, in the CSV: "
         "`frame_min_s` (the fastest frame) and `frame_cpu_s` (this process's CPU seconds per frame "
