@@ -27,7 +27,7 @@ from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.lighting import Lighting
 from aniso3d.rendering.quick import framing_camera
 from aniso3d.rendering.quick import render as render
-from aniso3d.rendering.renderer import Renderer
+from aniso3d.rendering.renderer import Renderer, render_frames
 
 __version__ = "0.1.0"
 
@@ -49,6 +49,7 @@ __all__ = [
     "load_mesh",
     "pyramid",
     "render",
+    "render_frames",
     "scenes",
     "sphere_directions",
     "turntable",

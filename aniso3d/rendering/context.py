@@ -5,6 +5,12 @@ Headless by default: EGL first (Mesa's llvmpipe works without a GPU), then
 OSMesa (libosmesa6 called through ctypes, for machines without EGL), then X11
 where ``DISPLAY`` is set. Renderers never create a context; they are handed
 one.
+
+On a machine with several GPUs, the EGL device to draw on is chosen with
+``GLContext(device=i)`` or the environment variable :data:`DEVICE_ENV`
+(``ANISO3D_EGL_DEVICE=i``): the i-th device EGL enumerates
+(``eglQueryDevicesEXT``), so that each worker of a cluster can be bound to
+its own GPU (docs/cluster.md).
 """
 
 from __future__ import annotations
@@ -22,6 +28,8 @@ log = logging.getLogger("aniso3d")
 
 BACKENDS = ("egl", "osmesa", "x11")
 REQUIRE = 330
+#: Environment variable naming the EGL device (an index) a context is made on.
+DEVICE_ENV = "ANISO3D_EGL_DEVICE"
 
 INSTALL_HINT = (
     "aniso3d needs OpenGL 3.3 or newer. On Debian/Ubuntu install Mesa's software "
@@ -84,8 +92,29 @@ class _OSMesaLoader:
             self.ctx = None
 
 
-def _create(backend: str) -> tuple[moderngl.Context, Any]:
+def egl_device(device: int | str | None = None) -> int | None:
+    """The EGL device index asked for: ``device``, else the environment's
+    :data:`DEVICE_ENV`, else None (EGL's default device); checked."""
+    if device is None:
+        device = os.environ.get(DEVICE_ENV) or None
+        if device is None:
+            return None
+        where = f"{DEVICE_ENV}={device!r}"
+    else:
+        where = f"device={device!r}"
+    try:
+        index = int(str(device).strip())
+    except ValueError:
+        index = -1
+    if isinstance(device, bool) or index < 0:
+        raise ResourceError(f"{where}: the EGL device must be a whole number >= 0 (0 is the first device)")
+    return index
+
+
+def _create(backend: str, device: int | None = None) -> tuple[moderngl.Context, Any]:
     if backend == "egl":
+        if device is not None:
+            return moderngl.create_standalone_context(backend="egl", require=REQUIRE, device_index=device), None
         return moderngl.create_standalone_context(backend="egl", require=REQUIRE), None
     if backend == "x11":
         if not os.environ.get("DISPLAY"):
@@ -109,27 +138,34 @@ class GLContext:
     """An OpenGL context with a program cache and an inventory of GPU objects.
 
     Use as a context manager, or call :meth:`release`. ``backend`` is "auto"
-    (EGL, then OSMesa, then X11), or one of :data:`BACKENDS`.
+    (EGL, then OSMesa, then X11), or one of :data:`BACKENDS`. ``device``
+    (default: the environment's :data:`DEVICE_ENV`) is the EGL device index;
+    with one, "auto" means EGL only (no silent fall-back to another device).
     """
 
-    def __init__(self, backend: str = "auto"):
+    def __init__(self, backend: str = "auto", device: int | None = None):
         if backend != "auto" and backend not in BACKENDS:
             raise ResourceError(f"unknown OpenGL backend '{backend}'; choose auto or one of {BACKENDS}")
-        order = BACKENDS if backend == "auto" else (backend,)
+        #: The EGL device index asked for (None: EGL's default).
+        self.device = egl_device(device)
+        if self.device is not None and backend not in ("auto", "egl"):
+            raise ResourceError(f"an EGL device ({self.device}) was asked for, but backend '{backend}' is not EGL")
+        order = ("egl",) if self.device is not None else BACKENDS if backend == "auto" else (backend,)
         errors = []
         self.ctx: moderngl.Context | None = None
         self._loader = None
         for name in order:
             try:
-                self.ctx, self._loader = _create(name)
+                self.ctx, self._loader = _create(name, self.device)
                 self.backend = name
                 break
             except Exception as exc:  # every backend fails in its own way
                 errors.append(f"{name}: {type(exc).__name__}: {exc}")
         if self.ctx is None:
-            raise ResourceError(
-                "no OpenGL 3.3+ context could be created (" + "; ".join(errors) + "). " + INSTALL_HINT
+            hint = INSTALL_HINT if self.device is None else (
+                f"EGL device {self.device} was asked for (device= or {DEVICE_ENV}); choose an index EGL lists"
             )
+            raise ResourceError("no OpenGL 3.3+ context could be created (" + "; ".join(errors) + "). " + hint)
         info = self.ctx.info
         self.renderer = str(info.get("GL_RENDERER", "?"))
         self.version = str(info.get("GL_VERSION", "?"))
@@ -155,6 +191,7 @@ class GLContext:
             raise ResourceError(f"OpenGL {ctx.version_code} is too old; aniso3d needs {REQUIRE}+")
         self = cls.__new__(cls)
         self.ctx, self._loader, self.backend, self._owns_ctx = ctx, None, "external", False
+        self.device = None
         info = ctx.info
         self.renderer = str(info.get("GL_RENDERER", "?"))
         self.version = str(info.get("GL_VERSION", "?"))

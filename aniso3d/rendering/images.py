@@ -12,8 +12,8 @@ from aniso3d.errors import InputError
 from aniso3d.files import atomic_write
 
 
-def save_png(path: str | os.PathLike, image: np.ndarray) -> Path:
-    """Write an (H, W, 3|4) uint8 image as PNG, atomically."""
+def png_bytes(image: np.ndarray) -> bytes:
+    """An (H, W, 3|4) uint8 image encoded as PNG (lossless)."""
     from PIL import Image
 
     img = np.asarray(image)
@@ -21,7 +21,12 @@ def save_png(path: str | os.PathLike, image: np.ndarray) -> Path:
         raise InputError(f"an image must be (H, W, 3|4) uint8, got {img.shape} {img.dtype}")
     buf = io.BytesIO()
     Image.fromarray(img).save(buf, format="PNG")
-    return atomic_write(path, buf.getvalue())
+    return buf.getvalue()
+
+
+def save_png(path: str | os.PathLike, image: np.ndarray) -> Path:
+    """Write an (H, W, 3|4) uint8 image as PNG, atomically."""
+    return atomic_write(path, png_bytes(image))
 
 
 def load_png(path: str | os.PathLike) -> np.ndarray:

@@ -40,6 +40,7 @@ selection.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 from dataclasses import dataclass, fields, replace
@@ -64,7 +65,7 @@ from aniso3d.errors import InputError
 from aniso3d.rendering.base import DrawOptions, MethodRenderer, choice, unknown_names
 from aniso3d.rendering.cache import Cache
 from aniso3d.rendering.camera import Camera
-from aniso3d.rendering.context import GLContext
+from aniso3d.rendering.context import BACKENDS, GLContext
 from aniso3d.rendering.frame import Frame, FrameView, view_depth
 from aniso3d.rendering.lighting import Lighting
 from aniso3d.rendering.select import needed_resolution
@@ -481,11 +482,25 @@ class Renderer:
         method: str | None = None,
         pattern: str = "frame_{:04d}.png",
         progress=None,
+        client=None,
+        workers: int | None = None,
         **options,
     ) -> list[Path]:
-        """Render one frame per camera to numbered PNG files in ``folder``."""
+        """Render one frame per camera to numbered PNG files in ``folder``.
+
+        With a Dask ``client`` (or ``workers`` > 1: a local cluster of that
+        many processes, made for the path), the frames are drawn on the
+        cluster's workers by :func:`render_frames`, each worker with its own
+        context and a renderer of this class, the same size and lighting;
+        the files are the same."""
         from aniso3d.rendering.images import save_png
 
+        if client is not None or (workers or 1) > 1:
+            size = options.pop("size", None) or self.size
+            backend = self.gl.backend if self.gl.backend in BACKENDS else "auto"
+            return render_frames(thing, cameras, folder, method, client=client, workers=workers, size=size,
+                                 lighting=self.lighting, backend=backend, pattern=pattern, progress=progress,
+                                 renderer=type(self), **options)  # fmt: skip
         build = options.get("build")
         resolution = build.resolution if isinstance(build, BuildOptions) else options.get("resolution")
         if resolution == AUTO and isinstance(thing, Mesh) and method not in (None, "mesh") and cameras:
@@ -529,3 +544,112 @@ class Renderer:
 
     def __exit__(self, *exc) -> None:
         self.release()
+
+
+def method_options(method: str) -> type[DrawOptions]:
+    """The draw options class of ``method`` (no GL context needed)."""
+    if method == "mesh":
+        from aniso3d.rendering.polygon import MeshRenderer as cls
+    elif method == "splat":
+        from aniso3d.rendering.splat import SplatRenderer as cls
+    elif method == "volume":
+        from aniso3d.rendering.volume import VolumeRenderer as cls
+    else:
+        raise InputError(f"unknown render method '{method}'; choose one of {', '.join(METHODS)}")
+    return cls.Options
+
+
+def render_frames(
+    thing,
+    cameras,
+    folder: str | os.PathLike | None = None,
+    method: str | None = None,
+    *,
+    client=None,
+    workers: int | None = None,
+    size=(512, 512),
+    ssaa: int = 1,
+    alpha: bool = False,
+    lighting: Lighting | None = None,
+    backend: str = "auto",
+    pattern: str = "frame_{:04d}.png",
+    progress=None,
+    batch_size: int | None = None,
+    threads: int | None = None,
+    retries: int = 1,
+    renderer: type[Renderer] | None = None,
+    build: BuildOptions | None = None,
+    options: DrawOptions | None = None,
+    **values,
+) -> list[np.ndarray] | list[Path]:
+    """One frame of ``thing`` per camera of ``cameras``, here or on a Dask
+    cluster: (H, W, 3|4) uint8 arrays in camera order, or, with ``folder``,
+    the numbered PNG files written there (``pattern``), each atomically.
+
+    Executors: this process (no ``client``, ``workers`` None or 1); a Dask
+    ``client`` (``dask.distributed.Client``); or ``workers`` > 1: a Dask
+    ``LocalCluster`` of that many worker processes made for this call. On a
+    cluster the path is cut into contiguous batches (``batch_size`` frames;
+    default: four batches per worker), the thing is scattered once to every
+    worker, and each worker draws with its own GL context and a renderer it
+    keeps (:mod:`aniso3d.rendering.distributed`); a worker lost mid-batch
+    has its batch drawn again elsewhere. The frames are the same pixel for
+    pixel whatever the executor.
+
+    ``threads``: llvmpipe threads per worker (``LP_NUM_THREADS``, set before
+    a worker's first GL context); default on a local cluster: the cores
+    shared out among the workers, elsewhere the workers' own setting.
+
+    A mesh drawn as volume or splats is converted once, before any frame
+    (on the cluster when there is one); ``resolution="auto"`` takes the
+    finest any camera needs, as :meth:`Renderer.render_path` does. Build and
+    draw options as in :meth:`Renderer.render`; ``renderer``: the class the
+    frames are drawn with (default :class:`Renderer`).
+    """
+    from aniso3d.rendering import distributed as dist
+
+    cams = [cameras] if isinstance(cameras, Camera) else list(cameras)
+    if not cams or not all(isinstance(c, Camera) for c in cams):
+        raise InputError("render_frames needs a list of one or more aniso3d.Camera objects")
+    w, h = check_size(size)
+    if method is None:
+        kinds = ((AnisoTexture, "volume"), (PointCloud, "splat"))
+        method = next((m for cls, m in kinds if isinstance(thing, cls)), "mesh")
+    opts = method_options(method).resolve(options, {k: v for k, v in values.items() if k not in BuildOptions.names()})
+    b = BuildOptions.resolve(build, {k: v for k, v in values.items() if k in BuildOptions.names()})
+    if isinstance(ssaa, bool) or int(ssaa) != ssaa or ssaa < 1:
+        raise InputError(f"supersampling factor must be a whole number >= 1, got {ssaa!r}")
+    if workers is not None and (isinstance(workers, bool) or int(workers) != workers or workers < 1):
+        raise InputError(f"workers must be a whole number of processes >= 1, got {workers!r}")
+    if folder is not None:
+        folder = Path(folder)
+        if folder.exists() and not folder.is_dir():
+            raise InputError(f"'{folder}' exists and is not a folder; frames are written as numbered PNGs there")
+        folder.mkdir(parents=True, exist_ok=True)
+    cls = renderer or Renderer
+    lighting = lighting or Lighting()
+    here = client is None and (workers or 1) == 1
+    executor = contextlib.nullcontext() if here else dist.frame_client(client, workers)
+    with executor as c:
+        if isinstance(thing, Mesh) and method != "mesh":
+            res = b.resolution
+            if res == AUTO:
+                res = max(needed_resolution(cam, (w, h), thing.bounds) for cam in cams)
+            thing = build_texture(thing, res, b.directions, client=c)  # once, for every frame
+            b = replace(b, resolution=res)
+        if here:
+            with cls((w, h), lighting, backend=backend) as r:
+                if folder is not None:
+                    return r.render_path(thing, cams, folder, method, pattern, progress, ssaa=ssaa, alpha=alpha,
+                                         build=b, options=opts)  # fmt: skip
+                out = []
+                for i, cam in enumerate(cams):
+                    out.append(r.render(thing, cam, method, ssaa=ssaa, alpha=alpha, build=b, options=opts))
+                    if progress:
+                        progress((i + 1) / len(cams), f"frame {i + 1}/{len(cams)}")
+                return out
+        if threads is None and client is None:
+            threads = dist.local_threads(workers)
+        job = dist.FrameJob(cls, (w, h), lighting, backend, method, int(ssaa), bool(alpha), b, opts, threads)
+        return dist.run_batches(c, thing, cams, job, folder=folder, pattern=pattern, progress=progress,
+                                batch_size=batch_size, retries=retries)  # fmt: skip
