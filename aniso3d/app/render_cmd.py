@@ -420,8 +420,6 @@ def _figure_lines(rows: list[FigureRow], args) -> list[str]:
 
 
 def cmd_frames(args) -> int:
-    from aniso3d.rendering.renderer import Renderer
-
     folder = Path(args.output)
     if folder.exists() and not folder.is_dir():
         raise InputError(f"'{folder}' exists and is not a folder; 'frames' writes numbered PNGs into a folder")
@@ -430,13 +428,49 @@ def cmd_frames(args) -> int:
     method = args.method or default_method(thing)
     cams = turntable(camera, args.frames, args.degrees)
     progress = Progress("frames", enabled=None if not args.quiet else False)
-    with Renderer(args.size, backend=args.backend) as r:
-        voxels = resolve_resolution(r, thing, method, cams, args)  # one texture for the whole path
-        paths = r.render_path(thing, cams, folder, method, progress=progress, ssaa=args.ssaa,
-                              **frame_options(method, args))  # fmt: skip
+    if args.scheduler is not None or args.workers > 1:
+        paths, where = _frames_on_cluster(thing, cams, folder, method, progress, args)
+        voxels = _path_voxels(thing, method, cams, args)
+    else:
+        from aniso3d.rendering.renderer import Renderer
+
+        with Renderer(args.size, backend=args.backend) as r:
+            voxels = resolve_resolution(r, thing, method, cams, args)  # one texture for the whole path
+            paths = r.render_path(thing, cams, folder, method, progress=progress, ssaa=args.ssaa,
+                                  **frame_options(method, args))  # fmt: skip
+        where = ""
     print(f"wrote {len(paths)} frames to {folder}/ ({paths[0].name} .. {paths[-1].name})"
-          + (f", {voxels}" if voxels else ""))  # fmt: skip
+          + (f", {voxels}" if voxels else "") + where)  # fmt: skip
     return 0
+
+
+def _frames_on_cluster(thing, cams, folder: Path, method: str, progress, args) -> tuple[list[Path], str]:
+    """``frames --workers N`` (a LocalCluster of N processes made here) or
+    ``--scheduler ADDRESS`` (an existing Dask cluster): the paths written and
+    where they were drawn, in words."""
+    from aniso3d.rendering.distributed import frame_client, local_threads, worker_count
+    from aniso3d.rendering.renderer import render_frames
+
+    local = args.scheduler in (None, "local")
+    threads = args.threads or (local_threads(args.workers) if local else None)
+    with frame_client(workers=args.workers, scheduler=args.scheduler) as client:
+        n = worker_count(client)
+        paths = render_frames(thing, cams, folder, method, client=client, size=args.size, ssaa=args.ssaa,
+                              backend=args.backend, progress=progress, threads=threads,
+                              **frame_options(method, args))  # fmt: skip
+    where = f"a local Dask cluster of {n} workers" if local else f"the Dask cluster at {args.scheduler} ({n} workers)"
+    lp = f", {threads} llvmpipe thread{'s' if threads != 1 else ''} each" if threads else ""
+    return paths, f"; drawn on {where}{lp}"
+
+
+def _path_voxels(thing, method: str, cams, args) -> str:
+    """The words for the texture a path is drawn from ("" for none), without a GL context."""
+    if not isinstance(thing, Mesh) or method == "mesh":
+        return ""
+    if args.resolution != AUTO:
+        return f"texture {args.resolution}³"
+    res = max(needed_resolution(c, args.size, thing.bounds) for c in cams)
+    return f"texture {res}³ (auto)"
 
 
 def register(sub) -> None:
@@ -454,4 +488,13 @@ def register(sub) -> None:
     f.add_argument("--degrees", type=float, default=360.0, help="total turn")
     f.add_argument("-o", "--output", default="frames", help="output folder")
     f.add_argument("--quiet", "-q", action="store_true")
+    f.add_argument("--workers", "-j", type=positive_int, default=1,
+                   help="draw the frames on a local Dask cluster of this many worker processes (each with "
+                        "its own GL context); needs aniso3d[cluster]. The frames are the same for any number")
+    f.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                   help="draw the frames on the Dask cluster whose scheduler is at ADDRESS (e.g. "
+                        "tcp://host:8786), or 'local' (as --workers); needs aniso3d[cluster]")
+    f.add_argument("--threads", type=positive_int, default=None,
+                   help="llvmpipe threads per worker (LP_NUM_THREADS, set before a worker's first GL "
+                        "context); default on a local cluster: the cores shared out among the workers")
     f.set_defaults(func=cmd_frames, size=(512, 512))
