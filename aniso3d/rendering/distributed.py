@@ -13,8 +13,9 @@ options, and the renderer class. Here:
   (its caches are keyed by the object);
 - each worker makes its own GL context on first use, inside the worker
   process (Dask starts worker processes with 'spawn': none inherits a
-  parent's context), and keeps one renderer per thread and per
-  (class, size, lighting, backend) in a small registry (:func:`worker_renderer`);
+  parent's context), one per worker thread (:func:`worker_context`), and
+  keeps a renderer on it per (class, size, lighting) in a small registry
+  (:func:`worker_renderer`);
 - before that first context, ``LP_NUM_THREADS`` is set in the worker when the
   job asks for a number of llvmpipe threads (Mesa reads it once per process);
 - a batch reports its start as a Dask event (topic :data:`TOPIC`), and
@@ -41,6 +42,7 @@ from typing import Any
 from aniso3d.errors import InputError, ResourceError
 from aniso3d.files import atomic_write
 from aniso3d.rendering.camera import Camera
+from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.images import png_bytes
 from aniso3d.rendering.lighting import Lighting
 
@@ -97,6 +99,8 @@ class FrameJob:
 _lock = threading.Lock()
 #: (thread id, renderer key) -> renderer, in order of last use.
 _registry: dict[tuple, Any] = {}
+#: Thread id -> the one GL context that thread draws with, shared by its renderers.
+_contexts: dict[int, GLContext] = {}
 #: What this process has done, for :func:`worker_state`.
 _counts = {"contexts": 0, "batches": 0, "frames": 0, "things": 0}
 #: The things this process has drawn, held weakly: a thing received again
@@ -104,23 +108,44 @@ _counts = {"contexts": 0, "batches": 0, "frames": 0, "things": 0}
 _things: list[weakref.ref] = []
 
 
+def worker_context(backend: str = "auto", threads: int | None = None) -> GLContext:
+    """This thread's GL context, made on first use. One per thread, shared by
+    every renderer the thread keeps: contexts belong to the thread that made
+    them, and several contexts drawn with in turn on one thread run many
+    times slower on llvmpipe (measured: 12 frames at 64^2 took 70 s instead
+    of 0.3 s). A later job asking for another backend than the context's
+    replaces it."""
+    tid = threading.get_ident()
+    with _lock:
+        gl = _contexts.get(tid)
+    if gl is not None and gl.ctx is not None and backend in ("auto", gl.backend):
+        return gl
+    if gl is not None:
+        release_workers(tid)
+    if threads is not None and _counts["contexts"] == 0:
+        # Mesa's llvmpipe reads this once, when the process's first context is made.
+        os.environ["LP_NUM_THREADS"] = str(threads)
+    gl = GLContext(backend)
+    with _lock:
+        _contexts[tid] = gl
+        _counts["contexts"] += 1
+    return gl
+
+
 def worker_renderer(job: FrameJob):
-    """This thread's renderer for ``job``: made (with its GL context) on first
-    use, then kept, so its conversions and uploads are reused by the next
-    batches. A GL context belongs to the thread that made it, hence one per
-    thread (run workers with one thread each)."""
-    key = (threading.get_ident(), job.renderer, job.size, job.lighting, job.backend)
+    """This thread's renderer for ``job``: made on first use, on the thread's
+    GL context (:func:`worker_context`), then kept, so that its conversions
+    and uploads serve the next batches. Run workers with one thread each:
+    every thread has its own context."""
+    gl = worker_context(job.backend, job.threads)
+    key = (threading.get_ident(), job.renderer, job.size, job.lighting)
     with _lock:
         r = _registry.pop(key, None)
-        if r is not None:
+        if r is not None and r.gl is gl:
             _registry[key] = r  # most recently used last
             return r
-    if job.threads is not None and _counts["contexts"] == 0:
-        # Mesa's llvmpipe reads this once, when the process's first context is made.
-        os.environ["LP_NUM_THREADS"] = str(job.threads)
-    r = job.renderer(job.size, job.lighting, backend=job.backend)
+    r = job.renderer(job.size, job.lighting, gl=gl)
     with _lock:
-        _counts["contexts"] += 1
         _registry[key] = r
         mine = [k for k in _registry if k[0] == key[0]]
         stale = [_registry.pop(k) for k in mine[: max(0, len(mine) - REGISTRY_SIZE)]]
@@ -174,13 +199,17 @@ def worker_state() -> dict:
                 "lp_num_threads": os.environ.get("LP_NUM_THREADS")}  # fmt: skip
 
 
-def release_workers() -> int:
-    """Release every renderer (and GL context) this process keeps; how many."""
+def release_workers(thread: int | None = None) -> int:
+    """Release the renderers and GL contexts this process keeps (of one
+    thread, or all); how many renderers."""
     with _lock:
-        kept = list(_registry.values())
-        _registry.clear()
+        keys = [k for k in _registry if thread is None or k[0] == thread]
+        kept = [_registry.pop(k) for k in keys]
+        gls = [_contexts.pop(t) for t in list(_contexts) if thread is None or t == thread]
     for r in kept:
         r.release()
+    for gl in gls:
+        gl.release()
     return len(kept)
 
 
