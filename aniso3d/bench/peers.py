@@ -616,7 +616,10 @@ def run_peers(settings: PeerSettings, progress: Callable[[float, str], None] | N
     from aniso3d.rendering.renderer import Renderer
 
     say = progress or (lambda f, s: None)
-    meta: dict = {"load_start": _loadavg(), "cpus": os.cpu_count(), "started": time.strftime("%Y-%m-%d %H:%M")}
+    from aniso3d.bench.run import code_version
+
+    meta: dict = {"load_start": _loadavg(), "cpus": os.cpu_count(), "started": time.strftime("%Y-%m-%d %H:%M"),
+                  "code": code_version()}  # fmt: skip
     t_start = time.perf_counter()
     w, h = settings.size
     with tempfile.TemporaryDirectory(prefix="aniso3d-peers.") as tmp:
@@ -650,7 +653,8 @@ def run_peers(settings: PeerSettings, progress: Callable[[float, str], None] | N
         silhouettes = None
         if settings.ply is None:
             say(0.05, "the truth's silhouettes")
-            mesh = torus_mesh()
+            nu = min(1024, max(128, 2 * max(w, h)))  # quads a few times finer than the pixels
+            mesh = torus_mesh(nu, nu // 2)
             with Renderer((w, h), backend=settings.backend) as rend:
                 meta["gl_renderer"] = rend.gl.renderer
                 silhouettes = [rend.render(mesh, camera.orbit(a), "mesh", alpha=True)[..., 3] > 0 for a in HOLE_VIEWS]
@@ -714,6 +718,12 @@ def run_peers(settings: PeerSettings, progress: Callable[[float, str], None] | N
 
 
 # ---------------------------------------------------------------- the report
+
+
+def _commit(code: dict | None) -> str:
+    if not code or not code.get("commit"):
+        return ""
+    return f", code at commit {code['commit'][:10]}" + (" with uncommitted changes" if code.get("dirty") else "")
 
 
 def _pct(x: float | None) -> str:
@@ -786,7 +796,8 @@ def report(result: PeerResult, command: str) -> str:
         f"radius {m['splat_radius']:.3g} world units, {m['point_px']:g} px across at the object's centre, "
         f"given to the peers.",
         f"OpenGL: {m.get('gl_renderer', 'n/a')}. Machine load (1, 5, 15 min) {la(m['load_start'])} at the start, "
-        f"{la(m['load_end'])} at the end, {m['cpus']} cores; {m['seconds']:.0f} s in all, started {m['started']}.",
+        f"{la(m['load_end'])} at the end, {m['cpus']} cores; {m['seconds']:.0f} s in all, started {m['started']}"
+        f"{_commit(m.get('code'))}.",
         "",
         *table(result),
         "",
@@ -800,19 +811,28 @@ def report(result: PeerResult, command: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-BEGIN, END = "<!-- bench peers:begin -->", "<!-- bench peers:end -->"
+def markers(result: PeerResult) -> tuple[str, str]:
+    """The report's begin and end markers: one pair per input (the torus by
+    its point count, a user's file by its name), so that runs at 1M and 100k
+    points keep their own sections of one page."""
+    key = result.settings.ply.name if result.settings.ply is not None else f"torus-{result.settings.points}"
+    return f"<!-- bench peers:{key}:begin -->", f"<!-- bench peers:{key}:end -->"
 
 
 def write_report(result: PeerResult, path: str | os.PathLike, command: str) -> Path:
-    """Write the report into ``path`` between its BEGIN/END markers (the rest of
-    the page kept), or as the whole file when it has none; atomically."""
+    """Write the report into ``path`` between its markers (:func:`markers`;
+    the rest of the page kept), appended when the page has no such section,
+    the whole file when there is none; atomically."""
     from aniso3d.files import atomic_write
 
-    body = f"{BEGIN}\n{report(result, command)}{END}"
+    begin, end = markers(result)
+    body = f"{begin}\n{report(result, command)}{end}"
     p = Path(path)
     old = p.read_text() if p.exists() else ""
-    if BEGIN in old and END in old:
-        text = old[: old.index(BEGIN)] + body + old[old.index(END) + len(END):]
+    if begin in old and end in old:
+        text = old[: old.index(begin)] + body + old[old.index(end) + len(end):]
+    elif old:
+        text = old.rstrip("\n") + f"\n\n{body}\n"
     else:
         text = f"# aniso3d and its peers\n\n{body}\n"
     return atomic_write(p, text.encode())
