@@ -3,9 +3,11 @@ animated WebP (both through Pillow, a core dependency) or H.264 MP4 (through
 imageio-ffmpeg, the optional ``video`` extra), the format chosen by the file
 name's suffix.
 
-Frames are taken one at a time from any iterable (a generator that renders as
-the video is written keeps one frame in memory for WebP and MP4; a GIF keeps
-each frame's 8-bit palette image, a third of its RGB size). The file is
+Frames are taken one at a time from any iterable. With a generator that
+renders as the video is written, MP4 keeps one frame in memory. GIF keeps
+each frame's 8-bit palette image, a third of its RGB size. WebP keeps every
+frame in RGB, because Pillow's encoder takes them all at once: 360 frames
+of 1024^2 make about 1.1 GB, so long, large turntables are better as MP4. The file is
 written like every other aniso3d output (:func:`aniso3d.files.atomic_write`):
 a failed or interrupted run leaves no half-written video and leaves a file
 already at that path untouched.
