@@ -28,6 +28,7 @@ from aniso3d.rendering.lighting import Lighting
 from aniso3d.rendering.quick import framing_camera
 from aniso3d.rendering.quick import render as render
 from aniso3d.rendering.renderer import Renderer, render_frames
+from aniso3d.rendering.video import write_video
 
 __version__ = "0.1.0"
 
@@ -53,4 +54,5 @@ __all__ = [
     "scenes",
     "sphere_directions",
     "turntable",
+    "write_video",
 ]

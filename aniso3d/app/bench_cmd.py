@@ -1,5 +1,6 @@
 """``aniso3d bench``: the speed/size/accuracy sweep (see :mod:`aniso3d.bench`),
-and with ``--corpus`` the corpus bench (:mod:`aniso3d.bench.corpus`).
+with ``--corpus`` the corpus bench (:mod:`aniso3d.bench.corpus`), and
+``aniso3d bench peers`` the point renderers side by side (:mod:`aniso3d.bench.peers`).
 
 This module owns the command line: it parses the options, loads the input and
 hands the bench a mesh, the settings and a progress bar; the bench itself knows
@@ -23,7 +24,9 @@ def register(subparsers) -> None:
         help="measure speed, size and error of every renderer and setting against a supersampled ground truth",
         description=(
             "Sweep resolution, directions K, point placement, splat shape, quality, renderer and camera "
-            "distance for a scene; write results.csv, results.json, plots and report.md into OUTDIR."
+            "distance for a scene; write results.csv, results.json, plots and report.md into OUTDIR. "
+            "'aniso3d bench peers' draws one point cloud with aniso3d and other point renderers "
+            "(see 'aniso3d bench peers --help')."
         ),
     )
     p.add_argument("mesh", nargs="?", default=None, help="mesh file or scene:NAME (default: the built-in tree)")
@@ -47,6 +50,86 @@ def register(subparsers) -> None:
     corpus.add_argument("--turntable", type=positive_int, default=None, metavar="N",
                         help="turntable frames for the flicker measurement (default: the preset's)")
     p.set_defaults(func=cmd_bench)
+    _add_peers(p)
+
+
+def _add_peers(bench: argparse.ArgumentParser) -> None:
+    """``aniso3d bench peers``: a subcommand of ``bench``, whose first
+    positional is otherwise a mesh. argparse cannot have both, so the bench
+    parser hands everything after the word ``peers`` to the peers parser."""
+    from aniso3d.bench.peers import CONTENDERS
+
+    peers = type(bench)(
+        prog="aniso3d bench peers",
+        description=(
+            "Draw one point cloud (default: a generated noisy torus, binary PLY without sizes) with aniso3d "
+            "(splats fast and high), a bare GL_POINTS floor and the peers that are installed (PyVista points "
+            "and points_gaussian, pyrender, Open3D: pip install 'aniso3d[peers]'), at one image size and "
+            "camera path; report frame time, peak memory and the holes inside the truth's silhouette."
+        ),
+    )
+    peers.add_argument("ply", nargs="?", default=None, help="a PLY point cloud (default: the generated torus)")
+    peers.add_argument("--points", type=positive_int, default=1_000_000, help="points of the torus (default 1M)")
+    peers.add_argument("--size", type=image_size, default=(1024, 1024), help="image size (default 1024)")
+    peers.add_argument("--frames", type=positive_int, default=6, help="timed frames per contender (>= 5)")
+    peers.add_argument("--rounds", type=positive_int, default=3, help="interleaved rounds the frames are split in")
+    peers.add_argument("--contenders", type=_contender_list, default=tuple(CONTENDERS), metavar="A,B",
+                       help=f"which to run (default all: {','.join(CONTENDERS)})")
+    peers.add_argument("-o", "--output", default=None, metavar="FILE.md",
+                       help="write the report here (between its markers if the file has them)")
+    peers.add_argument("--images", default=None, metavar="DIR", help="save each contender's first view as PNG")
+    peers.add_argument("--backend", default="auto", help="OpenGL backend of aniso3d's contenders")
+    peers.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+    peers.set_defaults(func=cmd_peers, command="bench peers")
+    original = bench.parse_known_args
+
+    def parse_known_args(args=None, namespace=None):
+        args = list(sys.argv[1:] if args is None else args)
+        if args[:1] == ["peers"]:
+            ns, rest = peers.parse_known_args(args[1:], namespace)
+            ns.peers_argv = args[1:]
+            return ns, rest
+        return original(args, namespace)
+
+    bench.parse_known_args = parse_known_args
+
+
+def _contender_list(text: str) -> tuple[str, ...]:
+    from aniso3d.bench.peers import CONTENDERS
+
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    bad = [n for n in names if n not in CONTENDERS]
+    if bad or not names:
+        raise argparse.ArgumentTypeError(f"unknown contender '{','.join(bad) or text}'; choose from "
+                                         f"{', '.join(CONTENDERS)}")  # fmt: skip
+    return names
+
+
+def cmd_peers(args: argparse.Namespace) -> int:
+    from aniso3d.bench.peers import PeerSettings, peers_command, run_peers, table, targets, write_report
+    from aniso3d.build.ply import read_ply_header
+
+    if args.ply is not None:
+        from aniso3d.build.mesh import check_readable_file
+
+        if not read_ply_header(check_readable_file(args.ply, "input")).is_point_cloud:
+            raise InputError(f"'{args.ply}' has faces; bench peers draws point clouds (a PLY without faces)")
+    if args.output is not None:
+        from aniso3d.files import refuse_overwriting_input
+
+        refuse_overwriting_input(args.output, args.ply)
+    settings = PeerSettings(ply=Path(args.ply) if args.ply else None, points=args.points, size=args.size,
+                            frames=args.frames, rounds=args.rounds, contenders=args.contenders,
+                            backend=args.backend, images=Path(args.images) if args.images else None)  # fmt: skip
+    progress = Progress("bench peers", enabled=False if args.quiet else None)
+    result = run_peers(settings, progress=progress)
+    print("\n".join(table(result) + [""] + targets(result)))
+    for r in result.rows:
+        if r.status == "skipped":
+            print(f"skipped: {r.label}: {r.note}")
+    if args.output is not None:
+        print(f"wrote {write_report(result, args.output, peers_command(args.peers_argv))}")
+    return 0
 
 
 def _scene_list(text: str) -> tuple[str, ...]:
@@ -142,4 +225,4 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 1 if result.failed else 0
 
 
-__all__ = ["cmd_bench", "cmd_corpus", "corpus_command", "register"]
+__all__ = ["cmd_bench", "cmd_corpus", "cmd_peers", "corpus_command", "register"]

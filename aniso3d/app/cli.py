@@ -12,6 +12,7 @@ import sys
 
 from aniso3d.app import bench_cmd, build_cmd, render_cmd, view_cmd
 from aniso3d.errors import Aniso3DError
+from aniso3d.rendering.video import is_video_path
 
 
 class _Parser(argparse.ArgumentParser):
@@ -62,7 +63,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt as exc:
         # Every file is written atomically: what was being written is not
         # there, and earlier outputs (or frames already finished) are whole.
-        what = "frames finished so far are complete" if args.command == "frames" else "no output was written"
+        pngs = args.command == "frames" and not is_video_path(args.output)
+        what = "frames finished so far are complete" if pngs else "no output was written"
         print(f"aniso3d {args.command}: interrupted; {what}", file=sys.stderr)
         return 128 + signal.SIGTERM if isinstance(exc, _Terminated) else 130
     except MemoryError:

@@ -420,34 +420,55 @@ def _figure_lines(rows: list[FigureRow], args) -> list[str]:
 
 
 def cmd_frames(args) -> int:
-    folder = Path(args.output)
-    if folder.exists() and not folder.is_dir():
-        raise InputError(f"'{folder}' exists and is not a folder; 'frames' writes numbered PNGs into a folder")
+    from aniso3d.files import refuse_overwriting_input
+    from aniso3d.rendering.video import check_video_output, is_video_path
+
+    out = Path(args.output)
+    video = is_video_path(out)
+    if video:  # checked before anything is loaded or rendered
+        check_video_output(out, args.fps)
+        refuse_overwriting_input(out, args.input)
+    elif out.exists() and not out.is_dir():
+        raise InputError(f"'{out}' exists and is not a folder; 'frames' writes numbered PNGs into a folder "
+                         "(or a video: end the name with .gif, .webp or .mp4)")  # fmt: skip
     thing = load_input(args.input, point_options=point_cloud_options(args))
     camera = camera_from_args(args, bounds_of(thing), surface_sample(thing))
     method = args.method or default_method(thing)
     cams = turntable(camera, args.frames, args.degrees)
     progress = Progress("frames", enabled=None if not args.quiet else False)
     if args.scheduler is not None or args.workers > 1:
-        paths, where = _frames_on_cluster(thing, cams, folder, method, progress, args)
+        result, where = _frames_on_cluster(thing, cams, None if video else out, method, progress, args)
         voxels = _path_voxels(thing, method, cams, args)
+        if video:
+            from aniso3d.rendering.video import write_video
+
+            path = write_video(result, out, args.fps)
+        else:
+            paths = result
     else:
         from aniso3d.rendering.renderer import Renderer
 
         with Renderer(args.size, backend=args.backend) as r:
             voxels = resolve_resolution(r, thing, method, cams, args)  # one texture for the whole path
-            paths = r.render_path(thing, cams, folder, method, progress=progress, ssaa=args.ssaa,
-                                  **frame_options(method, args))  # fmt: skip
+            opts = frame_options(method, args)
+            if video:
+                path = r.render_video(thing, cams, out, method, fps=args.fps, progress=progress, ssaa=args.ssaa,
+                                      **opts)  # fmt: skip
+            else:
+                paths = r.render_path(thing, cams, out, method, progress=progress, ssaa=args.ssaa, **opts)
         where = ""
-    print(f"wrote {len(paths)} frames to {folder}/ ({paths[0].name} .. {paths[-1].name})"
-          + (f", {voxels}" if voxels else "") + where)  # fmt: skip
+    if video:
+        what = f"wrote {len(cams)} frames to {path} at {args.fps:g} fps"
+    else:
+        what = f"wrote {len(paths)} frames to {out}/ ({paths[0].name} .. {paths[-1].name})"
+    print(what + (f", {voxels}" if voxels else "") + where)
     return 0
 
 
-def _frames_on_cluster(thing, cams, folder: Path, method: str, progress, args) -> tuple[list[Path], str]:
+def _frames_on_cluster(thing, cams, folder: Path | None, method: str, progress, args) -> tuple[list, str]:
     """``frames --workers N`` (a LocalCluster of N processes made here) or
-    ``--scheduler ADDRESS`` (an existing Dask cluster): the paths written and
-    where they were drawn, in words."""
+    ``--scheduler ADDRESS`` (an existing Dask cluster): the paths written (the
+    frames as arrays when ``folder`` is None) and where they were drawn, in words."""
     from aniso3d.rendering.distributed import frame_client, local_threads, worker_count
     from aniso3d.rendering.renderer import render_frames
 
@@ -481,12 +502,15 @@ def register(sub) -> None:
     p.add_argument("-o", "--output", default="render.png", help="output PNG")
     p.set_defaults(func=cmd_render)
 
-    f = sub.add_parser("frames", help="render a turntable to numbered PNGs")
+    f = sub.add_parser("frames", help="render a turntable to numbered PNGs or a video (.gif, .webp, .mp4)")
     add_render_options(f)
     f.add_argument("--method", choices=("mesh", "volume", "splat"), default=None)
     f.add_argument("--frames", type=positive_int, default=36)
     f.add_argument("--degrees", type=float, default=360.0, help="total turn")
-    f.add_argument("-o", "--output", default="frames", help="output folder")
+    f.add_argument("-o", "--output", default="frames",
+                   help="output folder of numbered PNGs, or a video file: .gif, .webp (Pillow) or .mp4 "
+                        "(needs pip install 'aniso3d[video]')")
+    f.add_argument("--fps", type=positive_float, default=24.0, help="frames per second of a video (default 24)")
     f.add_argument("--quiet", "-q", action="store_true")
     f.add_argument("--workers", "-j", type=positive_int, default=1,
                    help="draw the frames on a local Dask cluster of this many worker processes (each with "

@@ -474,6 +474,47 @@ class Renderer:
                 times.append(self.last_frame_seconds)
         return float(np.median(times))
 
+    def _path_options(self, thing, cameras: list[Camera], method: str | None, options: dict) -> dict:
+        """``options`` for every frame of a camera path: with ``resolution="auto"``
+        one texture for the whole path, the finest any frame needs."""
+        options = dict(options)
+        build = options.get("build")
+        resolution = build.resolution if isinstance(build, BuildOptions) else options.get("resolution")
+        if resolution == AUTO and isinstance(thing, Mesh) and method not in (None, "mesh") and cameras:
+            dirs = build.directions if isinstance(build, BuildOptions) else options.get("directions")
+            res = self.resolve_resolution(thing, cameras, options.get("size"), dirs or DEFAULT_DIRECTIONS)
+            if isinstance(build, BuildOptions):
+                options["build"] = replace(build, resolution=res)
+            else:
+                options["resolution"] = res
+        return options
+
+    def render_video(
+        self,
+        thing,
+        cameras: list[Camera],
+        path: str | os.PathLike,
+        method: str | None = None,
+        fps: float = 24.0,
+        progress=None,
+        **options,
+    ) -> Path:
+        """Render one frame per camera into one video file (``.gif``, ``.webp``
+        or ``.mp4``, by the suffix; :func:`aniso3d.rendering.video.write_video`),
+        written atomically. Frames are rendered as the file is written."""
+        from aniso3d.rendering.video import check_video_output, write_video
+
+        check_video_output(path, fps)  # before the first frame: a bad name or a missing extra fails at once
+        options = self._path_options(thing, cameras, method, options)
+
+        def frames():
+            for i, cam in enumerate(cameras):
+                yield self.render(thing, cam, method, **options)
+                if progress:
+                    progress((i + 1) / len(cameras), f"frame {i + 1}/{len(cameras)}")
+
+        return write_video(frames(), path, fps)
+
     def render_path(
         self,
         thing,
@@ -501,16 +542,7 @@ class Renderer:
             return render_frames(thing, cameras, folder, method, client=client, workers=workers, size=size,
                                  lighting=self.lighting, backend=backend, pattern=pattern, progress=progress,
                                  renderer=type(self), **options)  # fmt: skip
-        build = options.get("build")
-        resolution = build.resolution if isinstance(build, BuildOptions) else options.get("resolution")
-        if resolution == AUTO and isinstance(thing, Mesh) and method not in (None, "mesh") and cameras:
-            # One texture for the whole path: the finest any frame needs.
-            dirs = build.directions if isinstance(build, BuildOptions) else options.get("directions")
-            res = self.resolve_resolution(thing, cameras, options.get("size"), dirs or DEFAULT_DIRECTIONS)
-            if isinstance(build, BuildOptions):
-                options["build"] = replace(build, resolution=res)
-            else:
-                options["resolution"] = res
+        options = self._path_options(thing, cameras, method, options)
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
         paths = []
