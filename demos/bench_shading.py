@@ -140,6 +140,11 @@ def main() -> None:
 
     started = time.time()
     load0 = os.getloadavg()
+    try:  # the code measured: the commit checked out when the run starts
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                                check=True).stdout.strip()  # fmt: skip
+    except (OSError, subprocess.CalledProcessError):
+        commit = "unknown"
     rows = []
     with GLContext("auto") as gl:
         gl_name = gl.renderer
@@ -156,11 +161,6 @@ def main() -> None:
                 r.release()
     load1 = os.getloadavg()
     minutes = (time.time() - started) / 60
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                                check=True).stdout.strip()  # fmt: skip
-    except (OSError, subprocess.CalledProcessError):
-        commit = "unknown"
 
     table = []
     for r in rows:
