@@ -197,7 +197,7 @@ void main() {
     vec2 extent = fs_in.clip.zw - fs_in.clip.xy;
     if (layer == 0 && max(extent.x, extent.y) + 0.02 > u_shade_box && hit) {
         vec3 d = u_ray * xy1;
-        rgb = clamp(shade(fs_in.n, -normalize(d), fs_in.kd, fs_in.spec.x, fs_in.spec.y), 0.0, 1.0);
+        rgb = clamp(shade(fs_in.n, -normalize(d), fs_in.kd, fs_in.spec.x, fs_in.spec.y, length(fs_in.n)), 0.0, 1.0);
     }
 #endif
     vec4 v = vec4(rgb * c, c);
@@ -233,7 +233,7 @@ void main() {
     // passes its own (pushed, then quantised) visibility depth.
     if (depth > texelFetch(u_visible, ivec2(gl_FragCoord.xy), 0).r + 3e-7) discard;
     vec3 d = u_ray * xy1;
-    vec3 rgb = clamp(shade(fs_in.n, -normalize(d), fs_in.kd, fs_in.spec.x, fs_in.spec.y), 0.0, 1.0);
+    vec3 rgb = clamp(shade(fs_in.n, -normalize(d), fs_in.kd, fs_in.spec.x, fs_in.spec.y, length(fs_in.n)), 0.0, 1.0);
     float k = exp(-2.0 * dot(uv, uv));
     f_color = vec4(rgb * k, k);
 #endif

@@ -3,7 +3,8 @@
 // splat may cover, and the constants that let splat.frag intersect it exactly.
 //
 // In (one vertex per point, positions relative to the cloud's local origin):
-//   in_position (local frame), in_normal (unit, world orientation),
+//   in_position (local frame), in_normal (world orientation; its length is
+//   the point's coherence, see lighting.glsl),
 //   in_size = sqrt(area) (world units), in_kd (RGB), in_spec = (ks, shininess).
 // Out: SplatData (splat_data.glsl; all flat), and
 //   SPRITE path (default): gl_Position at the box centre and a gl_PointSize
@@ -111,7 +112,7 @@ vec3 bilinear(vec3 a, vec3 b, vec3 c, vec3 d) {
 }
 
 void main() {
-    vec3 n = in_normal;
+    vec3 n = normalize(in_normal);  // its length is the point's coherence
     vec3 helper = abs(n.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0);
     vec3 t = normalize(cross(n, helper));
     vec3 b = cross(n, t);
@@ -133,7 +134,7 @@ void main() {
     vs_out.num = abs(num);
     vs_out.kn = num != 0.0 ? u_depth.x / abs(num) : 0.0;
     vs_out.id = gl_VertexID;
-    vs_out.n = n;
+    vs_out.n = in_normal;
     vs_out.kd = in_kd;
     vs_out.spec = in_spec;
     float push = u_push * max(h.x, h.y);
@@ -246,7 +247,7 @@ void main() {
     vs_out.centre_zp = (u_depth.y - gf + push) / u_range;
     vs_out.rgb = vec3(0.0);
 #if PASS == 2
-    vs_out.rgb = clamp(shade(n, normalize(g - u_t0 * u_ray[0]), in_kd, in_spec.x, in_spec.y), 0.0, 1.0);
+    vs_out.rgb = clamp(shade(n, normalize(g - u_t0 * u_ray[0]), in_kd, in_spec.x, in_spec.y, length(in_normal)), 0.0, 1.0);
 #endif
     // Every pixel the filter reaches (the exact shape's edges are filtered
     // across their own normals, so its corners reach sqrt(2) times as far);

@@ -15,8 +15,8 @@
 // centre's window depth and the same pushed back by push, and the
 // visibility pass's push-back along the view axis.
 #define SPLAT_CENTRE flat vec2 centre_px; flat float centre_z; flat float centre_zp; flat float push;
-// Index of the point in the uploaded buffer; unit normal (world
-// orientation), diffuse colour and (ks, shininess).
+// Index of the point in the uploaded buffer; normal (world orientation,
+// its length the point's coherence), diffuse colour and (ks, shininess).
 #define SPLAT_SHADING flat int id; flat vec3 n; flat vec3 kd; flat vec2 spec;
 #ifdef AA
 // Coverage-aware splats: projected centre in pixels (continuous); sub-pixel

@@ -32,6 +32,6 @@ void main() {
     vec4 a0 = texelFetch(u_attrib, at, 0);
     vec4 a1 = texelFetch(u_attrib, at + ivec2(1, 0), 0);
     vec3 d = u_ray * vec3(1.0, gl_FragCoord.xy / u_viewport * 2.0 - 1.0);
-    f_color = vec4(clamp(shade(a0.xyz, -normalize(d), a1.rgb, a0.w, a1.w), 0.0, 1.0), 1.0);
+    f_color = vec4(clamp(shade(a0.xyz, -normalize(d), a1.rgb, a0.w, a1.w, length(a0.xyz)), 0.0, 1.0), 1.0);
     gl_FragDepth = depth;
 }

@@ -164,7 +164,8 @@ void composite(int v, vec3 x_in, float t0, float chord) {
         base_nb += area * abs(n * g_nbdir);
         vec3 ns = u_normal_mode == 0 ? n : dirs[b.w].xyz;
         float wgt = area * abs(dot(ns, g_d));
-        vec3 c = clamp(shade(ns, view, vec3(kd_rg, kd_b_ks.x), kd_b_ks.y, shininess), 0.0, 1.0);
+        // The mean normal's length is its facets' coherence (lighting.glsl).
+        vec3 c = clamp(shade(ns, view, vec3(kd_rg, kd_b_ks.x), kd_b_ks.y, shininess, length(n)), 0.0, 1.0);
         col_w += wgt * c;
         sum_w += wgt;
         col_a += area * c;

@@ -41,6 +41,11 @@ class PointCloud:
         ks: (N,) float32 specular coefficient.
         shininess: (N,) float32 Phong exponent.
         name: label used in reports.
+        coherence: (N,) float32 in [0, 1], the length of the area-weighted
+            mean unit normal of the facets a point stands for (1: one plane;
+            None gives 1 everywhere, as for a scanned cloud); the lighting
+            model shades the normals' spread from it
+            (:func:`~aniso3d.rendering.lighting.shade_np`).
     """
 
     positions: np.ndarray
@@ -50,6 +55,7 @@ class PointCloud:
     ks: np.ndarray
     shininess: np.ndarray
     name: str = "points"
+    coherence: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         p = np.ascontiguousarray(self.positions, dtype=np.float64)
@@ -76,6 +82,15 @@ class PointCloud:
         kd = np.broadcast_to(np.asarray(self.kd, dtype=np.float32), (n, 3))
         ks = np.broadcast_to(np.asarray(self.ks, dtype=np.float32), (n,))
         sh = np.broadcast_to(np.asarray(self.shininess, dtype=np.float32), (n,))
+        if self.coherence is None:
+            coh = np.ones(n, dtype=np.float32)
+        else:
+            coh = np.asarray(self.coherence, dtype=np.float32)
+            if coh.shape != (n,):
+                raise InputError(f"point coherence must have shape ({n},), got {coh.shape}")
+            if n and not np.isfinite(coh).all():
+                raise InputError("point coherence holds NaN or Inf values")
+        object.__setattr__(self, "coherence", np.clip(coh, 0.0, 1.0))
         object.__setattr__(self, "positions", p)
         object.__setattr__(self, "normals", nrm.astype(np.float32))
         object.__setattr__(self, "areas", areas)
@@ -97,7 +112,8 @@ class PointCloud:
     @property
     def nbytes(self) -> int:
         """Bytes as uploaded for rendering: float32 position, normal, radius,
-        RGB, ks, n = 12 floats per point."""
+        RGB, ks, n = 12 floats per point (the coherence rides as the
+        uploaded normal's length)."""
         return int(len(self) * 12 * 4)
 
     def total_area(self) -> float:

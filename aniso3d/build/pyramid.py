@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aniso3d.build.points import PointCloud
-from aniso3d.build.texture import PLACEMENTS, POINT_NORMALS, AnisoTexture, entry_points
+from aniso3d.build.texture import PLACEMENTS, POINT_NORMALS, AnisoTexture, entry_coherence, entry_points
 from aniso3d.errors import InputError
 from aniso3d.grid import cell_coords, cell_keys, weighted_means
 
@@ -114,7 +114,8 @@ class Pyramid(list):
             tex = self[level]
             pe = self.adaptive_counts(level) if per_entry == "adaptive" else per_entry
             arrays = entry_points(tex, None, placement, pe, normal)
-            cloud = PointCloud(*arrays, name=str(tex.meta.get("source", "points")))
+            cloud = PointCloud(*arrays, name=str(tex.meta.get("source", "points")),
+                               coherence=entry_coherence(tex, None, pe))  # fmt: skip
             eoff = np.asarray(tex.entry_offsets, dtype=np.int64)
             if np.ndim(pe) == 0:
                 offsets = eoff * int(pe)

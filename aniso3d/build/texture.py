@@ -245,7 +245,8 @@ class AnisoTexture:
         direction N_p (the paper's reading). See :func:`entry_points`.
         """
         arrays = entry_points(self, None, placement, per_entry, normal)
-        return PointCloud(*arrays, name=str(self.meta.get("source", "points")))
+        return PointCloud(*arrays, name=str(self.meta.get("source", "points")),
+                          coherence=entry_coherence(self, None, per_entry))  # fmt: skip
 
     # ------------------------------------------------------------------ I/O
 
@@ -314,11 +315,9 @@ def entry_points(
     if normal not in POINT_NORMALS:
         raise InputError(f"unknown point normal '{normal}'; choose one of {', '.join(POINT_NORMALS)}")
     off = np.asarray(t.entry_offsets)
-    if voxels is None:
-        ent = slice(None)
-    else:
+    ent = _entry_selection(t, voxels)
+    if voxels is not None:
         voxels = np.asarray(voxels, dtype=np.int64)
-        ent = ranges(off[voxels], off[voxels + 1])
     h = float(t.voxel_size)
     sample_n = t.directions[t.entry_direction[ent]]
     if normal == "mean":
@@ -337,22 +336,51 @@ def entry_points(
         pos = centre if placement == "center" else centre + 0.5 * h * sample_n
     area = t.entry_area[ent] * h * h
     kd, ks, sh = t.entry_kd[ent], t.entry_ks[ent], t.entry_shininess[ent]
-    if np.ndim(per_entry) == 0:
-        _check_count(per_entry)
-        counts = None if int(per_entry) == 1 else np.full(len(area), int(per_entry), dtype=np.int64)
-    else:
-        pe = np.asarray(per_entry)
-        if pe.shape != (t.n_entries,) or (len(pe) and (pe.min() < 1 or np.any(pe != np.round(pe)))):
-            raise InputError(f"per-entry point counts must be ({t.n_entries},) whole numbers >= 1")
-        counts = pe[ent].astype(np.int64)
-        if len(counts) and counts.max() == 1:
-            counts = None
+    counts = _point_counts(t, ent, len(area), per_entry)
     if counts is None:
         return pos, nrm, area, kd, ks, sh
     # np.repeat, not a gather by index: the same values, a contiguous copy.
     rep = lambda a: np.repeat(a, counts, axis=0)  # noqa: E731
     m = rep(counts).astype(np.float64)
     return rep(pos) + _spread(nrm, area, counts, h), rep(nrm), rep(area) / m, rep(kd), rep(ks), rep(sh)
+
+
+def entry_coherence(
+    texture: AnisoTexture, voxels: np.ndarray | None = None, per_entry: int | np.ndarray = 1
+) -> np.ndarray:
+    """(P,) float32 coherence of the points :func:`entry_points` makes with
+    the same ``voxels`` and ``per_entry``, in the same order: the length of
+    their entry's area-weighted mean facet normal, in [0, 1] (1: a flat
+    patch; less: normals that spread). Registration files a facet under the
+    sample direction nearest its normal, so an entry's facets lie within one
+    cell of the shading sphere, a cone narrower than a hemisphere for K >= 6
+    (docs/shading.md): their normals never cancel as opposite faces of a
+    two-sided sheet would, and the length measures their spread alone."""
+    ent = _entry_selection(texture, voxels)
+    c = np.clip(np.linalg.norm(np.asarray(texture.entry_normal[ent], dtype=np.float64), axis=1), 0.0, 1.0)
+    counts = _point_counts(texture, ent, len(c), per_entry)
+    return (c if counts is None else np.repeat(c, counts)).astype(np.float32)
+
+
+def _entry_selection(t: AnisoTexture, voxels: np.ndarray | None) -> slice | np.ndarray:
+    """The entries of ``voxels`` (indices into ``t.coords``), in that order; every entry for None."""
+    if voxels is None:
+        return slice(None)
+    off = np.asarray(t.entry_offsets)
+    voxels = np.asarray(voxels, dtype=np.int64)
+    return ranges(off[voxels], off[voxels + 1])
+
+
+def _point_counts(t: AnisoTexture, ent: slice | np.ndarray, n: int, per_entry: int | np.ndarray) -> np.ndarray | None:
+    """Points per selected entry (``n`` of them), or None when every entry makes one."""
+    if np.ndim(per_entry) == 0:
+        _check_count(per_entry)
+        return None if int(per_entry) == 1 else np.full(n, int(per_entry), dtype=np.int64)
+    pe = np.asarray(per_entry)
+    if pe.shape != (t.n_entries,) or (len(pe) and (pe.min() < 1 or np.any(pe != np.round(pe)))):
+        raise InputError(f"per-entry point counts must be ({t.n_entries},) whole numbers >= 1")
+    counts = pe[ent].astype(np.int64)
+    return None if len(counts) and counts.max() == 1 else counts
 
 
 def _check_count(value) -> None:

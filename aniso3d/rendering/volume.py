@@ -227,10 +227,8 @@ def _entry_colors(
 ) -> tuple[np.ndarray, np.ndarray]:
     """(E', 3) shaded colours, clamped to [0, 1], of entries ``rows`` seen along
     the unit vector ``w``, and (E', 3) the normals they were shaded with."""
-    if normal == "mean":
-        n = np.asarray(texture.entry_normal, dtype=np.float64)[rows]
-    else:
-        n = texture.directions[texture.entry_direction[rows]]
+    mean = np.asarray(texture.entry_normal, dtype=np.float64)[rows]
+    n = mean if normal == "mean" else texture.directions[texture.entry_direction[rows]]
     c = shade_np(
         n,
         -w,
@@ -238,6 +236,7 @@ def _entry_colors(
         texture.entry_ks[rows],
         texture.entry_shininess[rows],
         lighting,
+        np.linalg.norm(mean, axis=1),  # the facets' coherence
     )
     return np.clip(c, 0.0, 1.0), n
 

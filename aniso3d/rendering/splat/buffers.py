@@ -111,8 +111,21 @@ def upload_points(gl: GLContext, cloud: PointCloud | LodPoints) -> GPUPoints:
     bounds = cloud.bounds
     origin = 0.5 * (bounds[0] + bounds[1])
     order = morton_order(cloud.positions - origin)
-    arrays = (cloud.positions, cloud.normals, cloud.areas, cloud.kd, cloud.ks, cloud.shininess)
+    arrays = (cloud.positions, uploaded_normals(cloud), cloud.areas, cloud.kd, cloud.ks, cloud.shininess)
     return _upload_arrays(gl, GPUPoints, arrays, order, bounds, origin)
+
+
+#: Least coherence uploaded: the normal's length carries it, and the splat's
+#: orientation must survive normalising it.
+MIN_COHERENCE = 1e-3
+
+
+def uploaded_normals(cloud: PointCloud) -> np.ndarray:
+    """(N, 3) float32 normals as uploaded: the unit normal times the point's
+    coherence (at least :data:`MIN_COHERENCE`), so one vertex attribute gives
+    the shaders both (splat.vert normalises it for the splat's plane and
+    passes its length to shade())."""
+    return cloud.normals * np.maximum(cloud.coherence, MIN_COHERENCE)[:, None]
 
 
 def _upload_arrays(gl: GLContext, cls, arrays, order, bounds, origin, **extra) -> GPUPoints:
@@ -196,7 +209,7 @@ def upload_lod(gl: GLContext, lod: LodPoints) -> GPULodPoints:
     b0 = clouds[0].bounds  # level 0 keeps the origin a plain upload of its points has
     origin = 0.5 * (b0[0] + b0[1])
     arrays = tuple(
-        np.concatenate([getattr(c, name) for c in clouds])
+        np.concatenate([uploaded_normals(c) if name == "normals" else getattr(c, name) for c in clouds])
         for name in ("positions", "normals", "areas", "kd", "ks", "shininess")
     )
     empty = np.full((2, 3), np.nan)

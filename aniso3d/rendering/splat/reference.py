@@ -163,7 +163,7 @@ def subpixel_fragments_np(cloud: PointCloud, view: FrameView, opts: SplatOptions
     zhi = np.clip((depth[splat] - near + rad) / (far - near), 0.0, 1.0)
     z = np.clip(lin, zlo, zhi)
     view_dir = -p / np.linalg.norm(p, axis=1, keepdims=True)
-    rgb = np.clip(shade_np(n, view_dir, cloud.kd, cloud.ks, cloud.shininess, view.lighting), 0.0, 1.0)
+    rgb = np.clip(shade_np(n, view_dir, cloud.kd, cloud.ks, cloud.shininess, view.lighting, cloud.coherence), 0.0, 1.0)
     # The slices span the view depths the cloud's splats may reach
     # (culling.depth_range: the bounds grown by the largest splat).
     b = cloud.bounds + np.array([[-1.0], [1.0]]) * float(size.max()) * math.hypot(*opts.extent)
