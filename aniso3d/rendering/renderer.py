@@ -52,6 +52,7 @@ import numpy as np
 from aniso3d.build.mesh import Mesh
 from aniso3d.build.points import PointCloud
 from aniso3d.build.pyramid import LodPoints, Pyramid, pyramid
+from aniso3d.build.scene import Scene
 from aniso3d.build.texture import (
     DEFAULT_DIRECTIONS,
     DEFAULT_RESOLUTION,
@@ -440,11 +441,18 @@ class Renderer:
             b = replace(b, resolution=self.resolve_resolution(thing, camera, (w, h), b.directions))
         if b.lod and method not in ("splat", "volume"):
             raise InputError(f"level of detail applies to the splat and volume methods, not '{method}'")
-        if not b.lod and values.get("pixel_error", getattr(options, "pixel_error", None)) is not None:
+        if not (b.lod or isinstance(thing, Scene)) and values.get("pixel_error", getattr(options, "pixel_error", None)) is not None:
             raise InputError("pixel_error applies with lod=True only")
         impl = self.method_renderer(method)
         opts = impl.Options.resolve(options, values)
-        handle = self.upload(thing, method, build=b)
+        if isinstance(thing, Scene):  # instances of shared assets: aniso3d.rendering.scene_draw
+            from aniso3d.rendering.scene_draw import draw_scene, upload_scene
+
+            handle = upload_scene(self, thing, method, b)
+            draw = lambda: draw_scene(impl, handle, view, fbo, opts)  # noqa: E731
+        else:
+            handle = self.upload(thing, method, build=b)
+            draw = lambda: impl.draw(handle, view, fbo=fbo, options=opts)  # noqa: E731
         near, far = camera.clip_range(handle.bounds)
         view = FrameView(camera, self.lighting, (fw, fh), near, far, ssaa)
         fbo = self._fbo((fw, fh))
@@ -453,10 +461,10 @@ class Renderer:
         self.gl.ctx.viewport = (0, 0, fw, fh)
         bg = self.lighting.background
         fbo.clear(bg[0], bg[1], bg[2], 0.0, depth=1.0)
-        stats = impl.draw(handle, view, fbo=fbo, options=opts)
+        stats = draw()
         raw = fbo.read(components=4, dtype="f1")
         self.last_frame_seconds = time.perf_counter() - t0
-        self.last_lod_stats = dict(stats.lod) if b.lod and stats.lod is not None else None
+        self.last_lod_stats = dict(stats.lod) if (b.lod or isinstance(thing, Scene)) and stats.lod is not None else None
         img = np.frombuffer(raw, dtype=np.uint8).reshape(fh, fw, 4)[::-1]
         if ssaa > 1:
             img = np.round(downsample(img.astype(np.float32), ssaa)).astype(np.uint8)

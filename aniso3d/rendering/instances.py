@@ -1,0 +1,156 @@
+"""Per-instance choices for a :class:`~aniso3d.build.scene.Scene`, for all
+instances at once in NumPy (no Python loop per instance):
+
+- :func:`instance_spheres`: each instance's world bounding sphere and the
+  largest stretch of its transform;
+- :func:`visible_instances`: frustum culling of those spheres;
+- :func:`instance_levels`: the pyramid level each instance is drawn from, the
+  coarsest whose voxels project to at most ``pixel_error`` pixels at the front
+  of the instance's sphere (the rule of :func:`~aniso3d.rendering.select.volume_level`);
+- :func:`groups`: instances gathered by (asset, level), so a renderer draws
+  one instanced call per group;
+- :func:`instance_data`: the per-instance vertex attributes (a float32 mat4,
+  column-major, and an RGBA8 tint: 68 bytes) of the instances drawn.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from aniso3d.errors import InputError
+from aniso3d.rendering.camera import Camera
+
+#: Bytes of one drawn instance's vertex attributes: a float32 mat4 and RGBA8.
+INSTANCE_STRIDE = 64 + 4
+
+
+def instance_spheres(transforms: np.ndarray, bounds) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """World bounding spheres of instances of an asset whose box is ``bounds``
+    (2, 3): centres (N, 3) float64, radii (N,) and ``stretch`` (N,), the
+    largest singular value of each linear part (a length in the asset grows
+    by at most that much). ``transforms`` (N, 4, 4)."""
+    m = np.asarray(transforms, dtype=np.float64)
+    b = np.asarray(bounds, dtype=np.float64)
+    centre = 0.5 * (b[0] + b[1])
+    half = 0.5 * float(np.linalg.norm(b[1] - b[0]))
+    a = m[:, :3, :3]
+    stretch = np.linalg.svd(a, compute_uv=False)[:, 0] if len(m) else np.zeros(0)
+    centres = a @ centre + m[:, :3, 3]
+    return centres, half * stretch, stretch
+
+
+@dataclass(frozen=True)
+class ViewCone:
+    """A camera's frustum as :func:`visible_instances` tests it: eye, world ->
+    eye-frame axes (columns right, up, forward), clip depths, the side planes'
+    unit normals in the (lateral, depth) plane, and ``scale`` (framebuffer
+    pixels per world unit at unit depth)."""
+
+    eye: np.ndarray
+    axes: np.ndarray
+    near: float
+    far: float
+    cx: float
+    sx: float
+    cy: float
+    sy: float
+    scale: float
+
+    @classmethod
+    def of(cls, camera: Camera, size: tuple[int, int], near: float | None = None,
+           far: float | None = None) -> ViewCone:  # fmt: skip
+        """The cone of ``camera`` for a framebuffer ``size`` (W, H); ``near``
+        and ``far`` default to the camera's own, else 0 and no limit."""
+        if not isinstance(camera, Camera):
+            raise InputError(f"instance selection needs an aniso3d.Camera, got {type(camera).__name__}")
+        w, h = int(size[0]), int(size[1])
+        if w < 1 or h < 1:
+            raise InputError(f"image size must be at least 1x1 pixels, got {size}")
+        near = camera.near if near is None else near
+        far = camera.far if far is None else far
+        right, up, fwd = camera.basis()
+        ty = math.tan(math.radians(camera.fov) / 2.0)
+        tx = ty * w / h
+        return cls(
+            eye=np.asarray(camera.position, dtype=np.float64),
+            axes=np.stack([right, up, fwd], axis=1),
+            near=0.0 if near is None else float(near),
+            far=math.inf if far is None else float(far),
+            cx=1.0 / math.hypot(1.0, tx), sx=tx / math.hypot(1.0, tx),
+            cy=1.0 / math.hypot(1.0, ty), sy=ty / math.hypot(1.0, ty),
+            scale=h / (2.0 * ty),
+        )  # fmt: skip
+
+    def eye_frame(self, centres: np.ndarray) -> np.ndarray:
+        """(N, 3) eye-frame coordinates (x right, y up, z view depth)."""
+        return (np.asarray(centres, dtype=np.float64) - self.eye) @ self.axes
+
+
+def visible_instances(centres: np.ndarray, radii: np.ndarray, cone: ViewCone) -> np.ndarray:
+    """(N,) bool: which spheres touch the frustum (the four side planes, near
+    and far). Conservative: a sphere near a frustum corner may pass."""
+    e = cone.eye_frame(centres)
+    x, y, z = e[:, 0], e[:, 1], e[:, 2]
+    r = np.asarray(radii, dtype=np.float64)
+    return (
+        (z + r >= cone.near) & (z - r <= cone.far)
+        & (np.abs(x) * cone.cx - z * cone.sx <= r) & (np.abs(y) * cone.cy - z * cone.sy <= r)
+    )  # fmt: skip
+
+
+def instance_levels(
+    centres: np.ndarray, radii: np.ndarray, stretch: np.ndarray, voxel_sizes, cone: ViewCone,
+    pixel_error: float = 1.0,
+) -> np.ndarray:  # fmt: skip
+    """(N,) int64 pyramid level of each instance: the coarsest level l whose
+    voxel (edge ``voxel_sizes[l]`` in the asset, times the instance's
+    ``stretch`` in the world) covers at most ``pixel_error`` framebuffer
+    pixels at the front of the instance's sphere (depth ``z - r``). An
+    instance reaching the eye plane gets level 0; so does one no level is
+    coarse enough for... i.e. every level too large. ``voxel_sizes`` (L,)
+    ascending, finest first."""
+    if not (pixel_error > 0 and math.isfinite(pixel_error)):
+        raise InputError(f"pixel_error must be a positive number of pixels, got {pixel_error}")
+    h = np.asarray(voxel_sizes, dtype=np.float64)
+    z = cone.eye_frame(centres)[:, 2]
+    front = z - np.asarray(radii, dtype=np.float64)
+    safe = np.where(front > 0, front, 1.0)
+    pixels = h[None, :] * (np.asarray(stretch) * cone.scale / safe)[:, None]  # (N, L)
+    fine_enough = np.count_nonzero(pixels <= pixel_error, axis=1)
+    return np.where(front > 0, np.maximum(fine_enough - 1, 0), 0).astype(np.int64)
+
+
+def groups(levels: np.ndarray) -> list[tuple[int, np.ndarray]]:
+    """(level, instance indices ascending) for each level used: a stable sort,
+    one loop step per level (never per instance)."""
+    levels = np.asarray(levels, dtype=np.int64)
+    if not len(levels):
+        return []
+    order = np.argsort(levels, kind="stable")
+    used, first = np.unique(levels[order], return_index=True)
+    bounds = np.append(first, len(order))
+    return [(int(lvl), order[bounds[k] : bounds[k + 1]]) for k, lvl in enumerate(used)]
+
+
+def back_to_front(centres: np.ndarray, cone: ViewCone) -> np.ndarray:
+    """Indices of instances ordered farthest first by their centres' view depth."""
+    return np.argsort(-cone.eye_frame(centres)[:, 2], kind="stable")
+
+
+def instance_data(transforms: np.ndarray, tints: np.ndarray, origin, asset_origin) -> bytes:
+    """Per-instance vertex data (:data:`INSTANCE_STRIDE` bytes each): the
+    float32 mat4 ``T(-origin) M T(asset_origin)`` (column-major: geometry
+    stored relative to ``asset_origin`` lands relative to the frame's
+    ``origin``, composed in float64) and the tint as RGBA8."""
+    m = np.asarray(transforms, dtype=np.float64).copy()
+    a0 = np.asarray(asset_origin, dtype=np.float64)
+    m[:, :3, 3] += m[:, :3, :3] @ a0 - np.asarray(origin, dtype=np.float64)
+    n = len(m)
+    out = np.empty(n, dtype=[("m", "<f4", (16,)), ("tint", "u1", (4,))])
+    out["m"] = m.transpose(0, 2, 1).reshape(n, 16)
+    out["tint"][:, :3] = tints
+    out["tint"][:, 3] = 255
+    return out.tobytes()
