@@ -924,7 +924,8 @@ def forest(n_trees: int = 100, species: int = 3, seed: int = 1, area: float | No
     from aniso3d.build.scene import Scene
 
     _check_count("forest", n_trees=n_trees)
-    if isinstance(species, bool) or not isinstance(species, (int, np.integer)) or not 1 <= species <= len(FOREST_SPECIES):
+    whole = isinstance(species, (int, np.integer)) and not isinstance(species, bool)
+    if not (whole and 1 <= species <= len(FOREST_SPECIES)):
         raise InputError(f"forest species must be a whole number from 1 to {len(FOREST_SPECIES)}, got {species!r}")
     side = 8.0 * float(np.sqrt(n_trees)) if area is None else area
     _check_positive("forest", area=side)

@@ -441,7 +441,8 @@ class Renderer:
             b = replace(b, resolution=self.resolve_resolution(thing, camera, (w, h), b.directions))
         if b.lod and method not in ("splat", "volume"):
             raise InputError(f"level of detail applies to the splat and volume methods, not '{method}'")
-        if not (b.lod or isinstance(thing, Scene)) and values.get("pixel_error", getattr(options, "pixel_error", None)) is not None:
+        lod_frame = b.lod or isinstance(thing, Scene)  # a scene's instances always choose a level
+        if not lod_frame and values.get("pixel_error", getattr(options, "pixel_error", None)) is not None:
             raise InputError("pixel_error applies with lod=True only")
         impl = self.method_renderer(method)
         opts = impl.Options.resolve(options, values)
@@ -464,7 +465,7 @@ class Renderer:
         stats = draw()
         raw = fbo.read(components=4, dtype="f1")
         self.last_frame_seconds = time.perf_counter() - t0
-        self.last_lod_stats = dict(stats.lod) if (b.lod or isinstance(thing, Scene)) and stats.lod is not None else None
+        self.last_lod_stats = dict(stats.lod) if lod_frame and stats.lod is not None else None
         img = np.frombuffer(raw, dtype=np.uint8).reshape(fh, fw, 4)[::-1]
         if ssaa > 1:
             img = np.round(downsample(img.astype(np.float32), ssaa)).astype(np.uint8)

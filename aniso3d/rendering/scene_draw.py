@@ -256,7 +256,7 @@ def _draw_volume(impl, up: SceneUpload, view: FrameView, fbo, opts) -> DrawStats
     """Back to front over the visible instances of every asset (one sort), each
     ray-marched inside its screen box in its own frame, blended "over"."""
     from aniso3d.rendering.camera import Camera
-    from aniso3d.rendering.lighting import Light, Lighting
+    from aniso3d.rendering.lighting import Light
 
     t0 = time.perf_counter()
     pixel_error = 1.0 if opts.pixel_error is None else opts.pixel_error
