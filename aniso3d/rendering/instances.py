@@ -154,3 +154,14 @@ def instance_data(transforms: np.ndarray, tints: np.ndarray, origin, asset_origi
     out["tint"][:, :3] = tints
     out["tint"][:, 3] = 255
     return out.tobytes()
+
+
+def describe_instances(stats: dict) -> str:
+    """One line for a scene frame's statistics (``Renderer.last_lod_stats``):
+    instances drawn and culled, instances per level, points drawn, selection time."""
+    levels = " ".join(f"{lvl}:{n:,}" for lvl, n in enumerate(stats.get("instances_per_level", ())) if n)
+    points = f" · {stats['points']:,} points" if "points" in stats else ""
+    return (
+        f"{stats['visible']:,} of {stats['instances']:,} instances ({stats['culled']:,} culled) · "
+        f"instances per level {levels or 'none'}{points} · {stats['selection_ms']:.1f} ms"
+    )

@@ -108,10 +108,11 @@ def _draw_mesh(impl, up: SceneUpload, view: FrameView) -> DrawStats:
     cone = ViewCone.of(view.camera, view.size, view.near, view.far)
     ctx = impl.gl.ctx
     drawn, visible = 0, []
-    for i, handle in enumerate(up.handles):
+    for i in range(len(up.handles)):
         c, r, _ = _spheres(up, i)
-        sel = np.flatnonzero(visible_instances(c, r, cone))
-        visible.append(sel)
+        visible.append(np.flatnonzero(visible_instances(c, r, cone)))
+    lod = _stats(up, visible, None, t0)
+    for i, (handle, sel) in enumerate(zip(up.handles, visible, strict=True)):
         if not len(sel):
             continue
         data = instance_data(up.scene.transforms[i][sel], up.scene.tints[i][sel], up.origin, handle.origin)
@@ -120,14 +121,14 @@ def _draw_mesh(impl, up: SceneUpload, view: FrameView) -> DrawStats:
             drawn += impl.draw_instances(handle, view, buf, len(sel), up.origin).drawn
         finally:
             buf.release()
-    lod = _stats(up, visible, None, t0)
     return DrawStats(drawn=drawn, unit="triangles", lod=lod)
 
 
 def _stats(up: SceneUpload, visible: list, levels: list | None, t0: float) -> dict:
     """The frame's per-instance choices: ``instance_levels`` per asset ((N,)
     int64, -1 where culled; 0 for polygons), ``instances``, ``visible``,
-    ``culled``, ``instances_per_level`` and ``selection_ms``."""
+    ``culled``, ``instances_per_level`` and ``selection_ms`` (culling and
+    level choice, from ``t0``)."""
     per_asset = []
     for i, sel in enumerate(visible):
         lv = np.full(len(up.scene.transforms[i]), -1, dtype=np.int64)
@@ -198,7 +199,7 @@ def _draw_splat(impl, up: SceneUpload, view: FrameView, opts) -> DrawStats:
             big = 2.0 * float(handle.level_size[level]) * reach * s[sel] * cone.scale
             wide = (z <= 0) | (big + 4.0 > pipe.max_sprite * np.where(z > 0, z, 1.0))
             plans.append((i, level, sel, wide))
-    t1 = time.perf_counter()
+    lod = _stats(up, visible, levels_of, t0)
     proxy = SimpleNamespace(
         origin=up.origin, bounds=up.bounds,
         block_size=np.array([max(float(h.level_size.max()) for h in up.handles)]),
@@ -233,8 +234,7 @@ def _draw_splat(impl, up: SceneUpload, view: FrameView, opts) -> DrawStats:
                 buf.release()
             if sprite:
                 drawn += (last - first) * len(sel)
-    lod = _stats(up, visible, levels_of, t0)
-    lod.update(points=drawn, draw_calls=len(plans), select_ms=1000.0 * (t1 - t0))
+    lod.update(points=drawn, draw_calls=len(plans))
     used = tuple(int(lvl) for lvl, n in enumerate(lod["instances_per_level"]) if n)
     return DrawStats(drawn=drawn, unit="points", levels=used, lod=lod)
 
