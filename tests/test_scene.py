@@ -297,6 +297,22 @@ def test_two_instances_render_like_two_quads(r, method, mean_tol, bad_tol):
 
 
 @pytest.mark.gpu
+@pytest.mark.parametrize("quality, mean_tol, bad_tol", [("blend", 2.0, 0.02), ("high", 3.0, 0.04)])
+def test_two_instances_every_splat_quality(r, quality, mean_tol, bad_tol):
+    """The blended qualities run their own passes over the instanced draws."""
+    sc = two_quads()
+    flat = sc.flattened()
+    cam = aniso3d.framing_camera(flat, r.size)
+    frame = r.render_frame(sc, cam, "splat", resolution=32, quality=quality)
+    want = r.render(flat, cam, "splat", resolution=32, lod=True, quality=quality)
+    d = np.abs(frame.color.astype(int) - want.astype(int))
+    assert (frame.color != 255).any(axis=2).mean() > 0.1
+    assert d.mean() <= mean_tol and (d.max(axis=2) > 30).mean() <= bad_tol
+    assert frame.stats.drawn == 2 * r.upload(sc.assets[0], "splat", resolution=32, lod=True).level_first[1]
+    assert np.isfinite(frame.depth).any()
+
+
+@pytest.mark.gpu
 def test_tints_and_rotation_shade_like_flattened(r):
     sc = Scene()
     sc.add(scenes.quad(1.0, kd=(0.9, 0.9, 0.9)), np.stack([translation(-0.6, 0, 0) @ yaw(0.7),
@@ -336,8 +352,6 @@ def test_far_instance_drawn_coarser(r):
 def test_scene_bad_draws(r):
     sc = two_quads()
     cam = aniso3d.framing_camera(sc, r.size)
-    with pytest.raises(InputError, match="fast"):
-        r.render(sc, cam, "splat", resolution=32, quality="blend")
     sheared = Scene()
     m = np.eye(4)
     m[0, 1] = 0.5
@@ -346,3 +360,39 @@ def test_scene_bad_draws(r):
         r.render(sheared, cam, "volume", resolution=16)
     with pytest.raises(InputError, match="no instances"):
         r.render(Scene(), cam, "mesh")
+
+
+# ------------------------------------------------------------------ command line
+
+
+@pytest.mark.gpu
+def test_cli_renders_a_forest_and_a_gltf_scene(tmp_path, capsys):
+    from PIL import Image
+
+    from aniso3d.app.cli import main
+
+    out = tmp_path / "forest.png"
+    code = main(["render", "--scene", "forest", "--trees", "4", "--size", "64", "--method", "splat",
+                 "-o", str(out)])  # fmt: skip
+    text = capsys.readouterr().out
+    assert code == 0 and out.exists()
+    assert "5 instances" in text and "instances per level" in text
+    img = np.asarray(Image.open(out))
+    assert img.shape == (64, 64, 3) and (img != 255).any()
+    p = tmp_path / "two.gltf"
+    _gltf(p, [{"mesh": 0, "translation": [1.0, 0.0, 0.0]}, {"mesh": 0, "translation": [-1.0, 0.0, 0.0]}], [])
+    code = main(["render", "--scene", str(p), "--size", "64", "--method", "mesh", "-o", str(tmp_path / "g.png")])
+    assert code == 0 and "2 of 2 instances" in capsys.readouterr().out
+
+
+def test_cli_scene_bad_arguments(tmp_path, capsys):
+    from aniso3d.app.cli import main
+
+    for argv, words in (
+        (["render", "--scene", "nowhere.obj"], "glTF"),
+        (["render", "in.ply", "--scene", "forest"], "not both"),
+        (["render", "--scene", "forest", "--method", "all"], "--method all"),
+    ):
+        code = main([*argv, "-o", str(tmp_path / "x.png")])
+        err = capsys.readouterr().err
+        assert code == 2 and words in err and "Traceback" not in err

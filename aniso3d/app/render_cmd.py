@@ -98,7 +98,7 @@ def add_render_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--backend", choices=("auto", "egl", "osmesa", "x11"), default="auto")
     p.add_argument("--scene", default=None, metavar="forest|FILE.gltf",
                    help="draw a scene of instances instead of one input: the built-in forest or a glTF file "
-                        "whose nodes share meshes (EXT_mesh_gpu_instancing too); splats draw with quality fast")
+                        "whose nodes share meshes (EXT_mesh_gpu_instancing too)")
     p.add_argument("--trees", type=positive_int, default=100, help="trees of --scene forest")
     add_point_cloud_options(p)
 
@@ -159,8 +159,7 @@ def draw_options(method: str, args):
     if method == "splat":
         from aniso3d.rendering.splat import SplatOptions
 
-        quality = "fast" if scene else args.quality
-        return SplatOptions(splat=args.splat, quality=quality, pixel_error=pixel_error)
+        return SplatOptions(splat=args.splat, quality=args.quality, pixel_error=pixel_error)
     if method == "volume":
         from aniso3d.rendering.volume import VolumeOptions
 

@@ -22,6 +22,13 @@ two bounded caches (:class:`~aniso3d.rendering.cache.Cache`: host memory and GPU
 memory), which hold the things weakly: a thing that is garbage-collected takes
 what was made from it along.
 
+A :class:`~aniso3d.build.scene.Scene` (many instances of a few meshes) is
+drawn by every method: each asset converted and uploaded once, every
+instance culled and, for splats and volume, given its own pyramid level, all
+at once (:mod:`~aniso3d.rendering.scene_draw`,
+:mod:`~aniso3d.rendering.instances`); ``last_lod_stats`` then holds the
+per-instance choices.
+
 ``resolution="auto"`` (a mesh drawn as volume or splats) converts it only as
 finely as the frame needs: :func:`~aniso3d.rendering.select.needed_resolution`
 of the camera, image size and mesh bounds (a power of two). A texture already

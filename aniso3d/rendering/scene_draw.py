@@ -9,10 +9,10 @@ volume) given a pyramid level at once in NumPy
 
 - polygons: one instanced draw call per asset (per instance a mat4 and a
   tint as instanced vertex attributes): the ground truth;
-- splats: one instanced draw call per (asset, level), the level's points
-  with each instance's matrix applied in the vertex stage (splat.vert
-  ``INSTANCED``), shaded in the same pass (splat.frag ``FORWARD``, quality
-  "fast" only);
+- splats: one instanced draw call per (asset, level) and pass, the level's
+  points with each instance's matrix applied in the vertex stage (splat.vert
+  ``INSTANCED``); quality "fast" shaded in the same pass (splat.frag
+  ``FORWARD``), "high" and "blend" by their own passes;
 - volume: each visible instance's screen box, farthest first, ray-marched in
   the instance's own frame (the camera and lights moved by the inverse
   transform; rigid motions with a uniform scale), blended "over".
@@ -96,7 +96,7 @@ def draw_scene(impl, up: SceneUpload, view: FrameView, fbo, opts) -> DrawStats:
     if up.method == "mesh":
         return _draw_mesh(impl, up, view)
     if up.method == "splat":
-        return _draw_splat(impl, up, view, opts)
+        return _draw_splat(impl, up, view, fbo, opts)
     return _draw_volume(impl, up, view, fbo, opts)
 
 
@@ -149,15 +149,85 @@ def _stats(up: SceneUpload, visible: list, levels: list | None, t0: float) -> di
 # ----------------------------------------------------------------------- splats
 
 
-def _splat_program(impl, opts, sprite: bool) -> moderngl.Program:
-    defines: dict[str, object] = {"ROUND": int(opts.splat != "square"), "PASS": 0, "INSTANCED": 1, "FORWARD": 1}
-    if sprite:
-        return impl.gl.program("splat.vert", "splat.frag", defines=defines)
-    defines["GEOMETRY_PATH"] = 1
-    return impl.gl.program("splat.vert", "splat.frag", geometry="splat.geom", defines=defines)
+@dataclass(eq=False)
+class _Plan:
+    """One instanced draw: asset ``asset``'s level ``level`` for the instances
+    ``sel``, with the widest splat each may show (pixels, inf when it reaches
+    the eye plane)."""
+
+    asset: int
+    level: int
+    sel: np.ndarray
+    widest: np.ndarray
 
 
-def _splat_vao(impl, handle, prog, instances) -> moderngl.VertexArray:
+class _InstancedGL:
+    """The context with ``defines`` added to every program it compiles."""
+
+    def __init__(self, gl, defines: dict):
+        self._gl, self._defines = gl, defines
+
+    def program(self, vertex, fragment, geometry=None, defines=None):
+        return self._gl.program(vertex, fragment, geometry, {**(defines or {}), **self._defines})
+
+    def __getattr__(self, name):
+        return getattr(self._gl, name)
+
+
+class _InstancedPipe:
+    """The splat pipeline with one pass over the points replaced by the
+    instanced draws of a frame's plans: the passes of qualities "high" and
+    "blend" (:mod:`~aniso3d.rendering.splat.coverage`) run on it unchanged,
+    their programs compiled with ``INSTANCED`` (splat.vert)."""
+
+    def __init__(self, pipe, up: SceneUpload, plans: list, defines: dict):
+        self._pipe = pipe
+        self.gl = _InstancedGL(pipe.gl, {"INSTANCED": 1, **defines})
+        self.up, self.plans = up, plans
+        self.drawn = 0
+
+    def program(self, kind: str, shape: str, sprite: bool, aa: bool = False) -> moderngl.Program:
+        return type(self._pipe).program(self, kind, shape, sprite, aa)
+
+    def __getattr__(self, name):
+        return getattr(self._pipe, name)
+
+    def splats(self, handle, view: FrameView, opts, kind: str, uniforms: dict) -> None:
+        """Every plan's instances: point sprites, then, for the instances that
+        may hold wider splats, the geometry path."""
+        from aniso3d.rendering.splat.params import AA_SHADE_BOX
+
+        aa = opts.quality == "high"
+        limit = self._pipe.max_sprite
+        if aa and kind == "accumulate":  # as SplatPipeline.splats: wide boxes are shaded in the geometry path
+            limit = min(limit, AA_SHADE_BOX)
+        ctx = self._pipe.gl.ctx
+        values = {**uniforms, "u_max_sprite": limit, "u_shade_box": AA_SHADE_BOX}
+        for sprite in (True, False):
+            prog = self.program(kind, opts.splat, sprite=sprite, aa=aa)
+            self._pipe.bind(prog, values)
+            for plan in self.plans:
+                sel = plan.sel if sprite else plan.sel[plan.widest + 4.0 > limit]
+                h = self.up.handles[plan.asset]
+                first = int(h.level_first[plan.level])
+                last = int(h.level_first[plan.level + 1]) if plan.level + 1 < len(h.level_first) else h.n_points
+                if not len(sel) or last <= first:
+                    continue
+                s = self.up.scene
+                buf = ctx.buffer(instance_data(s.transforms[plan.asset][sel], s.tints[plan.asset][sel],
+                                               self.up.origin, h.origin))  # fmt: skip
+                vao = _splat_vao(self._pipe.gl, h, prog, buf)
+                try:
+                    vao.render(moderngl.POINTS, vertices=last - first, first=first, instances=len(sel))
+                finally:
+                    vao.release()
+                    buf.release()
+                if sprite and kind in ("geometry", "visibility"):
+                    self.drawn += (last - first) * len(sel)
+
+
+def _splat_vao(gl, handle, prog, instances) -> moderngl.VertexArray:
+    """The asset's points (per vertex, as ``inst_*``) and the instances' mat4 and tint (divisor 1)."""
     from aniso3d.rendering.splat.buffers import ATTRIBUTES
 
     fmt, names = [], []
@@ -168,23 +238,22 @@ def _splat_vao(impl, handle, prog, instances) -> moderngl.VertexArray:
             names.append(local)
         else:
             fmt.append(f"{4 * k}x")
-    return impl.gl.ctx.vertex_array(
-        prog, [(handle.vbo, " ".join(fmt), *names), (instances, "16f 4f1/i", "in_instance", "in_tint")]
-    )
+    per_instance = ("16f 4f1/i", "in_instance", "in_tint") if "in_tint" in prog else ("16f 4x/i", "in_instance")
+    return gl.ctx.vertex_array(prog, [(handle.vbo, " ".join(fmt), *names), (instances, *per_instance)])
 
 
-def _draw_splat(impl, up: SceneUpload, view: FrameView, opts) -> DrawStats:
-    if opts.quality != "fast":
-        raise InputError(
-            f"a scene's instances are drawn as splats with quality 'fast' only, got '{opts.quality}'"
-        )
+def _draw_splat(impl, up: SceneUpload, view: FrameView, fbo, opts) -> DrawStats:
+    """Quality "fast": one forward-shaded pass (splat.frag ``FORWARD``: an
+    instance's normal and tint exist only in its vertex stage, so the
+    deferred shading of one cloud does not apply); "high" and "blend": their
+    own passes, each pass over the points made of the instanced draws."""
+    from aniso3d.rendering.splat.coverage import BlendPass, HighPass
+
     t0 = time.perf_counter()
     pixel_error = 1.0 if opts.pixel_error is None else opts.pixel_error
-    pipe = impl.pipe
     cone = ViewCone.of(view.camera, view.size, view.near, view.far)
     reach = math.hypot(*opts.extent)
-    plans = []
-    visible, levels_of = [], []
+    plans, visible, levels_of = [], [], []
     for i, handle in enumerate(up.handles):
         grow = float(handle.level_size.max()) * reach  # the largest splat's reach past its point
         c, r, s = _spheres(up, i, grow)
@@ -194,12 +263,12 @@ def _draw_splat(impl, up: SceneUpload, view: FrameView, opts) -> DrawStats:
         levels_of.append(lv)
         for level, idx in groups(lv):
             sel = vis[idx]
-            # The widest splat an instance may show, pixels: level's largest size at the sphere's front.
-            z = cone.eye_frame(c[sel])[:, 2] - r[sel]
+            front = cone.eye_frame(c[sel])[:, 2] - r[sel]
             big = 2.0 * float(handle.level_size[level]) * reach * s[sel] * cone.scale
-            wide = (z <= 0) | (big + 4.0 > pipe.max_sprite * np.where(z > 0, z, 1.0))
-            plans.append((i, level, sel, wide))
+            widest = np.where(front > 0, big / np.where(front > 0, front, 1.0), np.inf)
+            plans.append(_Plan(i, level, sel, widest))
     lod = _stats(up, visible, levels_of, t0)
+    pipe = impl.pipe
     proxy = SimpleNamespace(
         origin=up.origin, bounds=up.bounds,
         block_size=np.array([max(float(h.level_size.max()) for h in up.handles)]),
@@ -207,36 +276,32 @@ def _draw_splat(impl, up: SceneUpload, view: FrameView, opts) -> DrawStats:
     )  # fmt: skip
     uniforms = pipe.uniforms(proxy, view, opts)
     ctx = impl.gl.ctx
+    target = fbo if fbo is not None else ctx.fbo
+    viewport = ctx.viewport
     ctx.enable(moderngl.DEPTH_TEST | moderngl.PROGRAM_POINT_SIZE)
     ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
     ctx.depth_func = "<"
-    drawn = 0
-    for sprite in (True, False):
-        prog = _splat_program(impl, opts, sprite)
-        pipe.bind(prog, {**uniforms, "u_max_sprite": pipe.max_sprite})
-        for i, level, sel, wide in plans:
-            if not sprite:
-                sel = sel[wide]
-            if not len(sel):
-                continue
-            handle = up.handles[i]
-            first = int(handle.level_first[level])
-            last = int(handle.level_first[level + 1]) if level + 1 < len(handle.level_first) else handle.n_points
-            if last <= first:
-                continue
-            data = instance_data(up.scene.transforms[i][sel], up.scene.tints[i][sel], up.origin, handle.origin)
-            buf = ctx.buffer(data)
-            vao = _splat_vao(impl, handle, prog, buf)
-            try:
-                vao.render(moderngl.POINTS, vertices=last - first, first=first, instances=len(sel))
-            finally:
-                vao.release()
-                buf.release()
-            if sprite:
-                drawn += (last - first) * len(sel)
-    lod.update(points=drawn, draw_calls=len(plans))
+    try:
+        if opts.quality == "fast":
+            ipipe = _InstancedPipe(pipe, up, plans, {"FORWARD": 1})
+            ipipe.splats(proxy, view, opts, "geometry", uniforms)
+        else:
+            ipipe = _InstancedPipe(pipe, up, plans, {})
+            quality = {"high": HighPass, "blend": BlendPass}[opts.quality](ipipe)
+            quality.draw(proxy, view, opts, uniforms, quality.targets(view.size), target, viewport)
+    finally:
+        target.depth_mask = True
+        ctx.blend_equation = moderngl.FUNC_ADD
+        ctx.depth_func = "<"
+        ctx.blend_func = moderngl.DEFAULT_BLENDING
+        ctx.disable(moderngl.BLEND)
+        ctx.enable(moderngl.DEPTH_TEST)
+        if ctx.fbo is not target:
+            target.use()
+            ctx.viewport = viewport
+    lod.update(points=ipipe.drawn, draw_calls=len(plans))
     used = tuple(int(lvl) for lvl, n in enumerate(lod["instances_per_level"]) if n)
-    return DrawStats(drawn=drawn, unit="points", levels=used, lod=lod)
+    return DrawStats(drawn=ipipe.drawn, unit="points", levels=used, lod=lod)
 
 
 # ----------------------------------------------------------------------- volume
