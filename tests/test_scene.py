@@ -22,6 +22,7 @@ from aniso3d.rendering.instances import (
     instance_data,
     instance_levels,
     instance_spheres,
+    largest_eigenvalue,
     visible_instances,
 )
 
@@ -255,6 +256,30 @@ def test_levels_coarser_far_away_and_grouped():
     assert [(lvl, idx.tolist()) for lvl, idx in g] == [(0, [1, 4]), (1, [3]), (2, [0, 2])]
     order = back_to_front(centres, cone)
     assert order.tolist() == [3, 2, 1, 0, 4]
+
+
+def test_spheres_hold_the_transformed_box():
+    """Stretch = largest singular value (against NumPy's SVD), and every
+    transformed corner of the asset box lies in its instance's sphere."""
+    rng = np.random.default_rng(7)
+    m = np.tile(np.eye(4), (500, 1, 1))
+    m[:, :3, :3] = rng.normal(size=(500, 3, 3))
+    m[:, :3, 3] = rng.normal(size=(500, 3)) * 10
+    m[:3, :3, :3] = [np.eye(3), 2 * np.eye(3), np.diag([1.0, 3.0, 0.5])]  # repeated eigenvalues
+    box = np.array([[-1.0, 0.0, -2.0], [3.0, 5.0, 1.0]])
+    c, r, s = instance_spheres(m, box)
+    np.testing.assert_allclose(s, np.linalg.svd(m[:, :3, :3], compute_uv=False)[:, 0], rtol=1e-9)
+    a = m[:, :3, :3]
+    np.testing.assert_allclose(largest_eigenvalue(np.einsum("nki,nkj->nij", a, a)), s**2, rtol=1e-9)
+    corners = np.array([[x, y, z] for x in box[:, 0] for y in box[:, 1] for z in box[:, 2]])
+    world = np.einsum("nij,kj->nki", a, corners) + m[:, None, :3, 3]
+    assert (np.linalg.norm(world - c[:, None], axis=2) <= r[:, None] * (1 + 1e-12)).all()
+    sc = Scene()
+    sc.add(scenes.quad(), m)
+    qb = sc.asset_bounds(0)
+    corners = np.array([[x, y, z] for x in qb[:, 0] for y in qb[:, 1] for z in qb[:, 2]])
+    world = np.einsum("nij,kj->nki", sc.transforms[0][:, :3, :3].astype(float), corners) + m[:, None, :3, 3]
+    np.testing.assert_allclose(sc.instance_boxes(0), np.stack([world.min(1), world.max(1)], axis=1), atol=1e-4)
 
 
 def test_instance_data_composes_origins():

@@ -157,13 +157,17 @@ class Scene:
         return int(sum(a.n_faces * len(m) for a, m in zip(self.assets, self.transforms, strict=True)))
 
     def instance_boxes(self, i: int) -> np.ndarray:
-        """(N, 2, 3) float64 world boxes of asset ``i``'s instances: the
-        transformed asset box's eight corners, min and max (vectorised)."""
+        """(N, 2, 3) float64 world boxes of asset ``i``'s instances: exactly
+        the box of the transformed asset box's eight corners, as centre
+        ``A c + t`` plus or minus ``|A| h`` (h the half size), vectorised."""
         b = self.asset_bounds(i)
-        corners = np.array([[x, y, z] for x in b[:, 0] for y in b[:, 1] for z in b[:, 2]])  # (8, 3)
+        c, h = 0.5 * (b[0] + b[1]), 0.5 * (b[1] - b[0])
         m = self.transforms[i].astype(np.float64)
-        world = np.einsum("nij,kj->nki", m[:, :3, :3], corners) + m[:, None, :3, 3]
-        return np.stack([world.min(axis=1), world.max(axis=1)], axis=1)
+        a = m[:, :3, :3]
+        mid = a[:, :, 0] * c[0] + a[:, :, 1] * c[1] + a[:, :, 2] * c[2] + m[:, :3, 3]
+        aa = np.abs(a)
+        ext = aa[:, :, 0] * h[0] + aa[:, :, 1] * h[1] + aa[:, :, 2] * h[2]
+        return np.stack([mid - ext, mid + ext], axis=1)
 
     @property
     def bounds(self) -> np.ndarray:

@@ -37,9 +37,34 @@ def instance_spheres(transforms: np.ndarray, bounds) -> tuple[np.ndarray, np.nda
     centre = 0.5 * (b[0] + b[1])
     half = 0.5 * float(np.linalg.norm(b[1] - b[0]))
     a = m[:, :3, :3]
-    stretch = np.linalg.svd(a, compute_uv=False)[:, 0] if len(m) else np.zeros(0)
-    centres = a @ centre + m[:, :3, 3]
+    stretch = np.sqrt(largest_eigenvalue(np.einsum("nki,nkj->nij", a, a)))
+    centres = _apply(a, centre) + m[:, :3, 3]
     return centres, half * stretch, stretch
+
+
+def _apply(a: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(N, 3) ``a[n] @ v`` element-wise (a small matrix product would go to a
+    threaded BLAS whose spinning threads slow the software rasteriser after)."""
+    return a[:, :, 0] * v[0] + a[:, :, 1] * v[1] + a[:, :, 2] * v[2]
+
+
+def largest_eigenvalue(s: np.ndarray) -> np.ndarray:
+    """(N,) largest eigenvalue of symmetric (N, 3, 3) matrices, in closed form
+    (the trigonometric solution of the characteristic cubic), vectorised;
+    ``np.linalg.eigvalsh`` loops in LAPACK per matrix and takes ~10x longer."""
+    s = np.asarray(s, dtype=np.float64)
+    q = np.trace(s, axis1=1, axis2=2) / 3.0
+    p1 = s[:, 0, 1] ** 2 + s[:, 0, 2] ** 2 + s[:, 1, 2] ** 2
+    d = s - q[:, None, None] * np.eye(3)
+    p2 = (d[:, 0, 0] ** 2 + d[:, 1, 1] ** 2 + d[:, 2, 2] ** 2) + 2.0 * p1
+    p = np.sqrt(p2 / 6.0)
+    safe = np.where(p > 0, p, 1.0)
+    b = d / safe[:, None, None]
+    det = (b[:, 0, 0] * (b[:, 1, 1] * b[:, 2, 2] - b[:, 1, 2] * b[:, 2, 1])
+           - b[:, 0, 1] * (b[:, 1, 0] * b[:, 2, 2] - b[:, 1, 2] * b[:, 2, 0])
+           + b[:, 0, 2] * (b[:, 1, 0] * b[:, 2, 1] - b[:, 1, 1] * b[:, 2, 0]))  # fmt: skip
+    phi = np.arccos(np.clip(det / 2.0, -1.0, 1.0)) / 3.0
+    return np.where(p > 0, q + 2.0 * p * np.cos(phi), q)
 
 
 @dataclass(frozen=True)
@@ -86,7 +111,8 @@ class ViewCone:
 
     def eye_frame(self, centres: np.ndarray) -> np.ndarray:
         """(N, 3) eye-frame coordinates (x right, y up, z view depth)."""
-        return (np.asarray(centres, dtype=np.float64) - self.eye) @ self.axes
+        c = np.asarray(centres, dtype=np.float64) - self.eye
+        return c[:, 0:1] * self.axes[0] + c[:, 1:2] * self.axes[1] + c[:, 2:3] * self.axes[2]
 
 
 def visible_instances(centres: np.ndarray, radii: np.ndarray, cone: ViewCone) -> np.ndarray:
