@@ -79,10 +79,12 @@ def main() -> None:
             scene = aniso3d.scenes.forest(n, seed=1)
             cam = aniso3d.framing_camera(scene, esize, direction=VIEW)
             truth = r.render(scene, cam, "mesh", ssaa=8, size=esize)
-            for m in ("splat", "volume"):
-                img = r.render(scene, cam, m, size=esize, resolution=RESOLUTION)
+            for m, q in (("splat", "fast"), ("splat", "high"), ("volume", None)):
+                opts = {"quality": q} if q else {}
+                img = r.render(scene, cam, m, size=esize, resolution=RESOLUTION, **opts)
                 e = compare(truth, img)
-                errors.append({"n": n, "method": m, **{k: float(v) for k, v in e.items() if np.isfinite(v)}})
+                name = f"{m} {q}" if q else m
+                errors.append({"n": n, "method": name, **{k: float(v) for k, v in e.items() if np.isfinite(v)}})
                 print(errors[-1], flush=True)
             if n == ERROR_MAX:
                 from aniso3d.rendering.images import save_png
@@ -124,7 +126,9 @@ def write(rows, errors, load, args, out: Path) -> None:
         f"8 sqrt(n) m, framed from the same direction, so every forest fills about the same screen area. Splats "
         f"and volume convert each tree kind once at resolution {RESOLUTION} and draw every instance from the "
         "pyramid level chosen for it (pixel_error 1). Frame time is `Renderer.last_frame_seconds`: "
-        "selection, draw and read-back; median of the repetitions, (min-max).",
+        "selection, draw and read-back; median of the repetitions, (min-max). Splats: quality \"fast\", "
+        "each instance's level also limited to one point per pixel of its projected bounding sphere "
+        "(`aniso3d.rendering.instances.POINTS_PER_PIXEL`).",
         "",
         "| trees | method | frame ms | visible | points drawn | instances per level (0 = finest) |",
         "| ---: | --- | ---: | ---: | ---: | --- |",

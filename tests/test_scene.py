@@ -249,6 +249,13 @@ def test_levels_coarser_far_away_and_grouped():
     want = [min(5, max(0, math.floor(math.log2((d - 1.0) / (0.01 * scale))))) if d > 1 else 0 for d in depth]
     assert lv.tolist() == want
     assert lv[0] < lv[1] < lv[2] and lv[4] == 0
+    # With a points budget: no more points than pixels of the sphere's disc.
+    pts = np.array([100000, 25000, 6000, 1500, 400, 100])
+    lvb = instance_levels(centres, radii, np.ones(5), sizes, cone, 1.0, level_points=pts, points_per_pixel=2.0)
+    disc = [math.pi * (scale / (d - 1.0)) ** 2 if d > 1 else math.inf for d in depth]
+    within = [next((lvl for lvl in range(6) if pts[lvl] <= 2.0 * a), 5) for a in disc]
+    assert lvb.tolist() == [max(a, b) if d > 1 else 0 for a, b, d in zip(want, within, depth, strict=True)]
+    assert (lvb >= lv).all() and (lvb > lv).any()
     # A doubled instance is as coarse as an undoubled one half as far.
     lv2 = instance_levels(centres[:3] * 2, radii[:3] * 2, np.full(3, 2.0), sizes, cone, 1.0)
     np.testing.assert_array_equal(lv2, instance_levels(centres[:3], radii[:3], np.ones(3), sizes, cone, 1.0))

@@ -127,9 +127,15 @@ def visible_instances(centres: np.ndarray, radii: np.ndarray, cone: ViewCone) ->
     )  # fmt: skip
 
 
+#: Splats: at most this many points per pixel of an instance's projected
+#: bounding sphere (see :func:`instance_levels`): a far tree of a few pixels
+#: is drawn from a level of a few points, however small its voxels are there.
+POINTS_PER_PIXEL = 1.0
+
+
 def instance_levels(
     centres: np.ndarray, radii: np.ndarray, stretch: np.ndarray, voxel_sizes, cone: ViewCone,
-    pixel_error: float = 1.0,
+    pixel_error: float = 1.0, level_points=None, points_per_pixel: float = POINTS_PER_PIXEL,
 ) -> np.ndarray:  # fmt: skip
     """(N,) int64 pyramid level of each instance: the coarsest level l whose
     voxel (edge ``voxel_sizes[l]`` in the asset, times the instance's
@@ -137,7 +143,13 @@ def instance_levels(
     pixels at the front of the instance's sphere (depth ``z - r``). An
     instance reaching the eye plane gets level 0; so does one no level is
     coarse enough for... i.e. every level too large. ``voxel_sizes`` (L,)
-    ascending, finest first."""
+    ascending, finest first.
+
+    With ``level_points`` (L,) (points of each level, decreasing), the level
+    is also at least the finest whose points number at most
+    ``points_per_pixel`` times the pixels of the sphere's projected disc
+    (radius ``r scale / (z - r)``): the cost follows the pixels covered, so a
+    forest seen from afar costs about what a few near trees do."""
     if not (pixel_error > 0 and math.isfinite(pixel_error)):
         raise InputError(f"pixel_error must be a positive number of pixels, got {pixel_error}")
     h = np.asarray(voxel_sizes, dtype=np.float64)
@@ -146,7 +158,15 @@ def instance_levels(
     safe = np.where(front > 0, front, 1.0)
     pixels = h[None, :] * (np.asarray(stretch) * cone.scale / safe)[:, None]  # (N, L)
     fine_enough = np.count_nonzero(pixels <= pixel_error, axis=1)
-    return np.where(front > 0, np.maximum(fine_enough - 1, 0), 0).astype(np.int64)
+    level = np.maximum(fine_enough - 1, 0)
+    if level_points is not None:
+        if not (points_per_pixel > 0 and math.isfinite(points_per_pixel)):
+            raise InputError(f"points_per_pixel must be a positive number, got {points_per_pixel}")
+        n = np.asarray(level_points, dtype=np.float64)
+        disc = math.pi * (np.asarray(radii, dtype=np.float64) * cone.scale / safe) ** 2
+        over = np.count_nonzero(n[None, :] > (points_per_pixel * disc)[:, None], axis=1)
+        level = np.maximum(level, np.minimum(over, len(n) - 1))
+    return np.where(front > 0, level, 0).astype(np.int64)
 
 
 def groups(levels: np.ndarray) -> list[tuple[int, np.ndarray]]:

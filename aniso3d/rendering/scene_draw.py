@@ -246,8 +246,14 @@ def _draw_splat(impl, up: SceneUpload, view: FrameView, fbo, opts) -> DrawStats:
     """Quality "fast": one forward-shaded pass (splat.frag ``FORWARD``: an
     instance's normal and tint exist only in its vertex stage, so the
     deferred shading of one cloud does not apply); "high" and "blend": their
-    own passes, each pass over the points made of the instanced draws."""
+    own passes, each pass over the points made of the instanced draws. Each
+    instance's level: :func:`~aniso3d.rendering.instances.instance_levels`
+    with the points budget :data:`~aniso3d.rendering.instances.POINTS_PER_PIXEL`
+    (read at each frame)."""
+    from aniso3d.rendering import instances
     from aniso3d.rendering.splat.coverage import BlendPass, HighPass
+
+    points_per_pixel = instances.POINTS_PER_PIXEL
 
     t0 = time.perf_counter()
     pixel_error = 1.0 if opts.pixel_error is None else opts.pixel_error
@@ -258,7 +264,9 @@ def _draw_splat(impl, up: SceneUpload, view: FrameView, fbo, opts) -> DrawStats:
         grow = float(handle.level_size.max()) * reach  # the largest splat's reach past its point
         c, r, s = _spheres(up, i, grow)
         vis = np.flatnonzero(visible_instances(c, r, cone))
-        lv = instance_levels(c[vis], r[vis], s[vis], up.voxel_sizes[i], cone, pixel_error)
+        first = np.append(handle.level_first, handle.n_points)
+        lv = instance_levels(c[vis], r[vis], s[vis], up.voxel_sizes[i], cone, pixel_error,
+                             level_points=np.diff(first), points_per_pixel=points_per_pixel)  # fmt: skip
         visible.append(vis)
         levels_of.append(lv)
         for level, idx in groups(lv):
