@@ -113,6 +113,8 @@ def test_forest_is_deterministic_and_framed():
     assert box[0, 1] == pytest.approx(0.0, abs=1e-9) and box[1, 1] > 5.0
     side = 8.0 * math.sqrt(40)
     np.testing.assert_allclose(box[:, [0, 2]], [[-side / 2] * 2, [side / 2] * 2], atol=side * 0.2)
+    corners = a.corners()
+    np.testing.assert_allclose([corners.min(0), corners.max(0)], box)  # the framing points span the scene
     cam = aniso3d.framing_camera(a, (64, 64))
     assert visible_instances(*instance_spheres(a.transforms[1], a.asset_bounds(1))[:2],
                              ViewCone.of(cam, (64, 64))).all()  # fmt: skip

@@ -40,9 +40,11 @@ def bounds_of(thing: Mesh | AnisoTexture | PointCloud | Scene) -> np.ndarray:
     )
 
 
-def surface_sample(thing: Mesh | AnisoTexture | PointCloud, limit: int = 50_000) -> np.ndarray | None:
+def surface_sample(thing: Mesh | AnisoTexture | PointCloud | Scene, limit: int = 50_000) -> np.ndarray | None:
     """Up to ``limit`` points of the thing's surface (every k-th), for a
-    framing tighter than its bounding box."""
+    framing tighter than its bounding box (a scene: its instances' box corners)."""
+    if isinstance(thing, Scene):
+        return thing.corners(limit)
     if isinstance(thing, Mesh):
         pts = thing.vertices
     elif isinstance(thing, PointCloud):

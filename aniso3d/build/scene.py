@@ -102,7 +102,7 @@ class Scene:
     transforms: list[np.ndarray] = field(default_factory=list)
     tints: list[np.ndarray] = field(default_factory=list)
     name: str = "scene"
-    _bounds: list[np.ndarray] = field(default_factory=list, repr=False)
+    _bounds: list[np.ndarray] = field(default_factory=list, init=False, repr=False)
 
     def add(self, mesh: Mesh, transforms, tints=None) -> int:
         """Place ``mesh`` by every matrix of ``transforms`` ((N, 4, 4), (N, 3, 4)
@@ -177,6 +177,18 @@ class Scene:
             raise InputError(f"scene '{self.name}' has no instances: nothing to draw; add meshes with Scene.add")
         b = np.concatenate(boxes)
         return np.stack([b[:, 0].min(axis=0), b[:, 1].max(axis=0)])
+
+    def corners(self, limit: int = 50_000) -> np.ndarray:
+        """Up to ``limit`` (every k-th) corners of the instances' world boxes,
+        (M, 3) float64: a framing tighter than the scene's box (every instance
+        seen, none of the empty space of an irregular layout)."""
+        boxes = [self.instance_boxes(i) for i in range(len(self.assets)) if len(self.transforms[i])]
+        if not boxes:
+            return np.zeros((0, 3))
+        b = np.concatenate(boxes)
+        b = b[:: max(1, 8 * len(b) // limit)]
+        sel = np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)])  # (8, 3) of 0/1
+        return np.where(sel[None].astype(bool), b[:, None, 1], b[:, None, 0]).reshape(-1, 3)
 
     def flattened(self) -> Mesh:
         """One mesh of every instance (transforms and tints applied): the
