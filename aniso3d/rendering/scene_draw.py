@@ -328,9 +328,6 @@ def _similarity(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
 def _draw_volume(impl, up: SceneUpload, view: FrameView, fbo, opts) -> DrawStats:
     """Back to front over the visible instances of every asset (one sort), each
     ray-marched inside its screen box in its own frame, blended "over"."""
-    from aniso3d.rendering.camera import Camera
-    from aniso3d.rendering.lighting import Light
-
     t0 = time.perf_counter()
     pixel_error = 1.0 if opts.pixel_error is None else opts.pixel_error
     cone = ViewCone.of(view.camera, view.size, view.near, view.far)
@@ -363,26 +360,34 @@ def _draw_volume(impl, up: SceneUpload, view: FrameView, fbo, opts) -> DrawStats
     impl.blend_over = True
     target.depth_mask = False
     try:
-        for i, k, level, x, y, z, r in table:
-            i, k, level = int(i), int(k), int(level)
+        # Every drawn instance's camera and lights in its own frame, at once:
+        # x_local = R^T (x - t) / s for the eye; directions by R^T alone.
+        m = np.zeros((len(table), 4, 4))
+        for i in range(len(up.handles)):
+            rows = table[:, 0] == i
+            m[rows] = up.scene.transforms[i][table[rows, 1].astype(np.int64)]
+        scale = np.cbrt(np.abs(np.linalg.det(m[:, :3, :3]))) if len(m) else np.zeros(0)
+        rot_t = np.swapaxes(m[:, :3, :3], 1, 2) / scale[:, None, None]  # R^T
+        eye = np.einsum("nij,nj->ni", rot_t, np.asarray(cam.position) - m[:, :3, 3]) / scale[:, None]
+        axes = np.einsum("nij,jk->nki", rot_t, np.stack(cam.basis(), axis=1))  # (N, 3 axes, 3)
+        dirs = lighting.directions()
+        local_dirs = np.einsum("nij,lj->nli", rot_t, dirs)
+        base = black.uniforms()
+        for row in range(len(table)):
+            i, _, level, x, y, z, r = table[row]
             box = _screen_box(x, y, z, r, cone, w, h)
             if box is None:
                 continue
-            m = up.scene.transforms[i][k].astype(np.float64)
-            s = float(np.cbrt(abs(np.linalg.det(m[:3, :3]))))
-            rot = m[:3, :3] / s
-            inv_pos = rot.T @ (np.asarray(cam.position) - m[:3, 3]) / s
-            local_cam = Camera(
-                position=tuple(inv_pos), target=tuple(inv_pos + rot.T @ cam.forward),
-                up=tuple(rot.T @ cam.basis()[1]), fov=cam.fov,
+            light_dir = list(base["u_light_dir"])
+            light_dir[: len(dirs)] = [tuple(map(float, d)) for d in local_dirs[row]]
+            local_view = FrameView(
+                _LocalCamera(tuple(map(float, eye[row])), cam.fov, tuple(axes[row])),
+                _LocalLighting({**base, "u_light_dir": light_dir}, black.background),
+                view.size, view.near / scale[row], view.far / scale[row], view.ssaa,
             )  # fmt: skip
-            lights = tuple(Light(tuple(rot.T @ np.asarray(li.direction, dtype=np.float64)), li.color)
-                           for li in lighting.lights)  # fmt: skip
-            local_view = FrameView(local_cam, replace(black, lights=lights), view.size,
-                                   view.near / s, view.far / s, view.ssaa)  # fmt: skip
             target.scissor = box
-            stats = impl.draw(up.handles[i].levels[level], local_view, fbo=target, options=vopts)
             # The pass writes every pixel of the box, the "over" operator by blending.
+            stats = impl.draw(up.handles[int(i)].levels[int(level)], local_view, fbo=target, options=vopts)
             drawn += stats.drawn
     finally:
         impl.blend_over = False
@@ -393,6 +398,35 @@ def _draw_volume(impl, up: SceneUpload, view: FrameView, fbo, opts) -> DrawStats
     lod.update(voxels=drawn)
     used = tuple(int(lvl) for lvl, n in enumerate(lod["instances_per_level"]) if n)
     return DrawStats(drawn=drawn, unit="voxels", levels=used, lod=lod)
+
+
+@dataclass(frozen=True)
+class _LocalCamera:
+    """The camera seen from an instance's frame, as the volume renderer reads
+    a camera (position, fov, ``basis()``), made without a Camera's checks:
+    it is the checked frame camera moved by a checked similarity."""
+
+    position: tuple
+    fov: float
+    axes: tuple  # right, up, forward (unit)
+
+    def basis(self) -> tuple:
+        return self.axes
+
+    @property
+    def forward(self) -> np.ndarray:
+        return self.axes[2]
+
+
+@dataclass(frozen=True)
+class _LocalLighting:
+    """The frame's lights turned into an instance's frame, as the volume renderer reads them."""
+
+    values: dict
+    background: tuple
+
+    def uniforms(self) -> dict:
+        return self.values
 
 
 def _screen_box(x, y, z, r, cone: ViewCone, w: int, h: int) -> tuple[int, int, int, int] | None:
