@@ -4,7 +4,8 @@ splats or by ray marching (Ito, Fujimoto, Muraoka, Chiba).
 
 The data flow, one subpackage per stage:
 
-- :mod:`aniso3d.build`: load a mesh, clip it exactly into voxels, register the
+- :mod:`aniso3d.build`: load a mesh (or a :class:`Scene` of many instances of
+  a few meshes), clip it exactly into voxels, register the
   pieces on each voxel's density and shading spheres
   (:class:`AnisoTexture`), derive oriented points (:class:`PointCloud`) and the
   level-of-detail pyramid (CPU, NumPy);
@@ -20,6 +21,7 @@ from aniso3d.build import scenes
 from aniso3d.build.mesh import Mesh, load_mesh
 from aniso3d.build.points import PointCloud
 from aniso3d.build.pyramid import Pyramid, pyramid
+from aniso3d.build.scene import Scene, load_scene
 from aniso3d.build.texture import AnisoTexture, build_texture, sphere_directions
 from aniso3d.errors import Aniso3DError, FormatError, InputError, ResourceError
 from aniso3d.rendering.camera import Camera, turntable
@@ -45,9 +47,11 @@ __all__ = [
     "Pyramid",
     "Renderer",
     "ResourceError",
+    "Scene",
     "build_texture",
     "framing_camera",
     "load_mesh",
+    "load_scene",
     "pyramid",
     "render",
     "render_frames",

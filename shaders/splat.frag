@@ -86,6 +86,13 @@ uniform vec2 u_slices;  // (lo, scale): slice coordinate (z - lo) scale of a lin
 layout(r32ui) uniform uimage2DArray u_mask;  // SLICES / 32 words per pixel
 #endif
 #endif
+#if PASS == 0 && defined(FORWARD)
+// FORWARD (a scene's instances, quality "fast"): the geometry pass shades
+// each fragment itself (the instance's normal and tint exist only here),
+// writing colour, alpha 1, and the exact depth, instead of the point's id.
+#include "lighting.glsl"
+uniform mat3 u_ray;
+#endif
 #if PASS == 2
 uniform mat3 u_ray;
 #ifdef AA
@@ -101,7 +108,9 @@ uniform sampler2D u_visible;
 #include "splat_data.glsl"
 in SplatData SPLAT_DATA fs_in;
 
-#if PASS == 0
+#if PASS == 0 && defined(FORWARD)
+out vec4 f_color;
+#elif PASS == 0
 out uint f_id;
 #elif PASS == 2 && defined(AA)
 layout(location = 0) out vec4 f_layer[LAYERS];  // (RGB c, c) of each layer
@@ -223,7 +232,12 @@ void main() {
     }
 #if PASS == 0
     gl_FragDepth = inside ? fs_in.kn * tw : fs_in.centre_z;
+#ifdef FORWARD
+    f_color = vec4(clamp(shade(fs_in.n, -normalize(u_ray * xy1), fs_in.kd, fs_in.spec.x, fs_in.spec.y,
+                               length(fs_in.n)), 0.0, 1.0), 1.0);
+#else
     f_id = uint(fs_in.id);
+#endif
 #elif PASS == 1
     float pw = fs_in.push * h.z;
     gl_FragDepth = inside ? u_depth.x * (tw + pw) / (fs_in.num + pw) : fs_in.centre_zp;

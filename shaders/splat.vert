@@ -75,10 +75,38 @@ uniform float u_range;       // far - near
 
 #include "splat_data.glsl"
 
+#ifdef INSTANCED
+// A scene's instances: the asset's points (inst_*) and, per instance
+// (divisor 1), the frame-local <- asset-local affine matrix and an RGB tint.
+// instance_inputs() sets the usual in_* from them: position moved, normal by
+// the cofactor matrix (det(A) A^-T) keeping its length (the coherence), size by
+// the square root of the area's stretch |cof(A) n| / |n|, kd tinted; everything below is unchanged.
+in vec3 inst_position;
+in vec3 inst_normal;
+in float inst_size;
+in vec3 inst_kd;
+in mat4 in_instance;
+in vec4 in_tint;
+vec3 in_position;
+vec3 in_normal;
+float in_size;
+vec3 in_kd;
+void instance_inputs() {
+    mat3 a = mat3(in_instance);
+    vec3 cn = mat3(cross(a[1], a[2]), cross(a[2], a[0]), cross(a[0], a[1])) * inst_normal;
+    float coherence = length(inst_normal);  // kept as the moved normal's length
+    float stretch = coherence > 0.0 ? length(cn) / coherence : 0.0;
+    in_position = (in_instance * vec4(inst_position, 1.0)).xyz;
+    in_normal = stretch > 0.0 ? cn / stretch : inst_normal;
+    in_size = inst_size * sqrt(stretch);
+    in_kd = inst_kd * in_tint.rgb;
+}
+#else
 in vec3 in_position;
 in vec3 in_normal;
 in float in_size;
 in vec3 in_kd;
+#endif
 in vec2 in_spec;
 
 out SplatData SPLAT_DATA vs_out;
@@ -112,6 +140,9 @@ vec3 bilinear(vec3 a, vec3 b, vec3 c, vec3 d) {
 }
 
 void main() {
+#ifdef INSTANCED
+    instance_inputs();
+#endif
     vec3 n = normalize(in_normal);  // its length is the point's coherence
     vec3 helper = abs(n.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0);
     vec3 t = normalize(cross(n, helper));

@@ -144,6 +144,21 @@ def load_input(path: str | None, scene_options: dict | None = None, point_option
     return load_mesh(path)
 
 
+def load_scene_input(spec: str, trees: int = 100):
+    """A :class:`~aniso3d.build.scene.Scene` of instances: ``forest`` (the
+    built-in forest of ``trees`` trees) or a glTF file whose nodes share
+    meshes or use ``EXT_mesh_gpu_instancing``."""
+    from aniso3d.build import scenes
+    from aniso3d.build.scene import GLTF_SUFFIXES, load_scene
+    from aniso3d.errors import InputError
+
+    if spec == "forest":
+        return scenes.forest(trees)
+    if Path(spec).suffix.lower() in GLTF_SUFFIXES:
+        return load_scene(spec)
+    raise InputError(f"--scene takes 'forest' or a glTF file (.gltf, .glb) of instances, got '{spec}'")
+
+
 def ply_is_point_cloud(path: str) -> bool:
     """True if a PLY file declares no faces (or zero of them)."""
     from aniso3d.build.mesh import check_readable_file

@@ -28,6 +28,7 @@ from aniso3d.app.common import (
     add_point_cloud_options,
     image_size,
     load_input,
+    load_scene_input,
     point_cloud_options,
     positive_float,
     positive_int,
@@ -35,6 +36,7 @@ from aniso3d.app.common import (
 from aniso3d.build.bounds import bounds_of, surface_sample
 from aniso3d.build.mesh import Mesh
 from aniso3d.build.points import PointCloud
+from aniso3d.build.scene import Scene
 from aniso3d.build.texture import DEFAULT_DIRECTIONS
 from aniso3d.errors import InputError
 from aniso3d.rendering.camera import Camera, turntable
@@ -94,6 +96,10 @@ def add_render_options(p: argparse.ArgumentParser) -> None:
                    help="with --lod: the largest a drawn voxel may be on screen, in "
                         "framebuffer pixels (--ssaa subdivides them)")
     p.add_argument("--backend", choices=("auto", "egl", "osmesa", "x11"), default="auto")
+    p.add_argument("--scene", default=None, metavar="forest|FILE.gltf",
+                   help="draw a scene of instances instead of one input: the built-in forest or a glTF file "
+                        "whose nodes share meshes (EXT_mesh_gpu_instancing too)")
+    p.add_argument("--trees", type=positive_int, default=100, help="trees of --scene forest")
     add_point_cloud_options(p)
 
 
@@ -148,7 +154,8 @@ def draw_options(method: str, args):
     """The draw options of ``method``'s renderer from the command line: its
     ``Options`` dataclass (``--splat``, ``--quality``; ``--pixel-error`` with
     ``--lod``)."""
-    pixel_error = args.pixel_error if _lod(method, args) else None
+    scene = bool(getattr(args, "scene", None))  # a scene's instances always choose a level
+    pixel_error = args.pixel_error if _lod(method, args) or scene else None
     if method == "splat":
         from aniso3d.rendering.splat import SplatOptions
 
@@ -170,13 +177,31 @@ def frame_options(method: str, args) -> dict:
 def resolve_resolution(r, thing, method: str | None, cameras, args) -> str:
     """Turn ``--resolution auto`` into a number in ``args`` where a mesh is
     converted (the finest any of ``cameras`` needs, the texture made ready in
-    ``r``'s cache); the words for the output ("" where no texture is made)."""
+    ``r``'s cache; a scene's assets: :data:`SCENE_RESOLUTION`); the words for
+    the output ("" where no texture is made)."""
+    if isinstance(thing, Scene) and method != "mesh":
+        if args.resolution == AUTO:
+            args.resolution = SCENE_RESOLUTION
+        return f"texture {args.resolution}³ per asset, {thing.n_instances:,} instances"
     if not isinstance(thing, Mesh) or method == "mesh":
         return ""
     if args.resolution != AUTO:
         return f"texture {args.resolution}³"
     args.resolution = r.resolve_resolution(thing, cameras, args.size, args.directions)
     return f"texture {args.resolution}³ (auto)"
+
+
+#: Voxels along each asset's longest axis for a scene at ``--resolution auto``.
+SCENE_RESOLUTION = 64
+
+
+def read_input(args):
+    """The thing a command draws: ``--scene`` (a :class:`Scene`) or the input."""
+    if getattr(args, "scene", None):
+        if args.input is not None:
+            raise InputError(f"give either an input ('{args.input}') or --scene, not both")
+        return load_scene_input(args.scene, args.trees)
+    return load_input(args.input, point_options=point_cloud_options(args))
 
 
 def default_method(thing) -> str:
@@ -196,7 +221,9 @@ def cmd_render(args) -> int:
     if out.suffix.lower() != ".png":
         raise InputError(f"output '{out}' must end in .png")
     refuse_overwriting_input(out, args.input)
-    thing = load_input(args.input, point_options=point_cloud_options(args))
+    thing = read_input(args)
+    if isinstance(thing, Scene) and args.method == "all":
+        raise InputError("--method all draws one object; give a scene --method mesh, splat or volume")
     bounds = bounds_of(thing)
     camera = camera_from_args(args, bounds, surface_sample(thing))
     with Renderer(args.size, backend=args.backend) as r:
@@ -431,7 +458,7 @@ def cmd_frames(args) -> int:
     elif out.exists() and not out.is_dir():
         raise InputError(f"'{out}' exists and is not a folder; 'frames' writes numbered PNGs into a folder "
                          "(or a video: end the name with .gif, .webp or .mp4)")  # fmt: skip
-    thing = load_input(args.input, point_options=point_cloud_options(args))
+    thing = read_input(args)
     camera = camera_from_args(args, bounds_of(thing), surface_sample(thing))
     method = args.method or default_method(thing)
     cams = turntable(camera, args.frames, args.degrees)

@@ -299,6 +299,11 @@ def _check_binary_stl_size(p: Path) -> None:
         )
 
 
+def from_trimesh(tm, name: str = "mesh") -> Mesh:
+    """A :class:`Mesh` from one ``trimesh.Trimesh`` with its materials (as :func:`load_mesh` reads them)."""
+    return _from_trimesh(tm, name)
+
+
 def _from_trimesh(tm, name: str = "mesh") -> Mesh:
     n = len(tm.faces)
     kd = np.tile(np.asarray(DEFAULT_KD, dtype=np.float64), (n, 1))

@@ -899,3 +899,52 @@ def corpus(names=CORPUS, **kwargs_by_name: dict) -> Iterator[tuple[str, Mesh]]:
         raise InputError(f"unknown built-in scene(s) {unknown}; choose from {', '.join(SCENES)}")
     for name in names:
         yield name, get_scene(name, **kwargs_by_name.get(name, {}))
+
+
+# --------------------------------------------------------------------------- forest
+
+#: The tree kinds of :func:`forest`: :func:`tree` arguments, small trees
+#: (5,000-20,000 triangles) so that a forest of thousands stays drawable as
+#: polygons up to a few hundred.
+FOREST_SPECIES = (
+    {"seed": 11, "levels": 5, "leaves_per_twig": 30, "leaf_size": 0.22, "height": 8.0},
+    {"seed": 12, "levels": 4, "children": 5, "leaves_per_twig": 60, "leaf_size": 0.30, "height": 6.0},
+    {"seed": 13, "levels": 5, "children": 3, "leaves_per_twig": 20, "leaf_size": 0.18, "height": 11.0},
+)
+FOREST_GROUND_KD = (0.33, 0.30, 0.18)
+
+
+def forest(n_trees: int = 100, species: int = 3, seed: int = 1, area: float | None = None):
+    """A :class:`~aniso3d.build.scene.Scene`: ``n_trees`` trees of ``species``
+    kinds (1 to 3, :data:`FOREST_SPECIES`) scattered on a square ground quad
+    of edge ``area`` metres (default ``8 sqrt(n_trees)``: about 64 m^2 per
+    tree), each turned about the vertical, scaled by 0.8-1.2 and slightly
+    tinted. Every kind is one asset with many instances. Deterministic for a
+    given seed and arguments."""
+    from aniso3d.build.scene import Scene
+
+    _check_count("forest", n_trees=n_trees)
+    whole = isinstance(species, (int, np.integer)) and not isinstance(species, bool)
+    if not (whole and 1 <= species <= len(FOREST_SPECIES)):
+        raise InputError(f"forest species must be a whole number from 1 to {len(FOREST_SPECIES)}, got {species!r}")
+    side = 8.0 * float(np.sqrt(n_trees)) if area is None else area
+    _check_positive("forest", area=side)
+    rng = np.random.default_rng(seed)
+    kind = rng.integers(0, species, n_trees)
+    xz = rng.uniform(-0.5 * side, 0.5 * side, (n_trees, 2))
+    yaw = rng.uniform(0.0, 2.0 * np.pi, n_trees)
+    scale = rng.uniform(0.8, 1.2, n_trees)
+    tint = np.round(255 * rng.uniform(0.8, 1.0, (n_trees, 3))).astype(np.uint8)
+    c, s = np.cos(yaw) * scale, np.sin(yaw) * scale
+    m = np.zeros((n_trees, 4, 4))
+    m[:, 0, 0], m[:, 0, 2], m[:, 2, 0], m[:, 2, 2] = c, s, -s, c
+    m[:, 1, 1] = scale
+    m[:, 0, 3], m[:, 2, 3] = xz[:, 0], xz[:, 1]
+    m[:, 3, 3] = 1.0
+    scene = Scene(name=f"forest{n_trees}")
+    scene.add(quad(side, normal_axis=1, kd=FOREST_GROUND_KD, ks=0.02, shininess=4.0), np.eye(4))
+    for k in range(species):
+        mine = kind == k
+        if mine.any():
+            scene.add(tree(**FOREST_SPECIES[k]), m[mine], tint[mine])
+    return scene

@@ -97,6 +97,32 @@ class MeshRenderer:
         handle.vao.render(moderngl.TRIANGLES)
         return DrawStats(drawn=int(handle.n_faces), unit="triangles")
 
+    def draw_instances(
+        self, handle: GPUMesh, view: FrameView, instances: moderngl.Buffer, count: int,
+        origin=(0.0, 0.0, 0.0),
+    ) -> DrawStats:  # fmt: skip
+        """Draw ``count`` instances of ``handle`` in one instanced call: per
+        instance a mat4 and an RGBA8 tint (:func:`~aniso3d.rendering.instances.instance_data`,
+        relative to ``origin``) read from the buffer ``instances``."""
+        prog = self.gl.program("mesh.vert", "mesh.frag", defines={"INSTANCED": 1})
+        vao = self.gl.ctx.vertex_array(
+            prog,
+            [(handle.vbo, "3f 3f 3f 2f", "in_position", "in_normal", "in_kd", "in_spec"),
+             (instances, "16f 4f1/i", "in_instance", "in_tint")],
+        )  # fmt: skip
+        try:
+            ctx = self.gl.ctx
+            ctx.enable(moderngl.DEPTH_TEST)
+            ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
+            GLContext.set_uniforms(
+                prog, {"u_mvp": view.mvp(origin), "u_eye": view.eye_local(origin), **view.lighting.uniforms()},
+                strict=False,
+            )
+            vao.render(moderngl.TRIANGLES, instances=int(count))
+        finally:
+            vao.release()
+        return DrawStats(drawn=int(handle.n_faces) * int(count), unit="triangles")
+
     def release(self, handle: GPUMesh) -> None:
         self.gl.free(handle.vao, handle.vbo)
 

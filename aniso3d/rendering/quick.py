@@ -13,6 +13,7 @@ import numpy as np
 from aniso3d.build.bounds import bounds_of, surface_sample
 from aniso3d.build.mesh import Mesh
 from aniso3d.build.points import PointCloud
+from aniso3d.build.scene import Scene
 from aniso3d.build.texture import AnisoTexture
 from aniso3d.rendering.camera import Camera
 from aniso3d.rendering.renderer import Renderer, check_size
@@ -21,7 +22,7 @@ from aniso3d.rendering.renderer import Renderer, check_size
 DEFAULT_VIEW = (0.55, 0.35, 1.0)
 
 
-def framing_camera(thing: Mesh | AnisoTexture | PointCloud, size: tuple[int, int] = (512, 512),
+def framing_camera(thing: Mesh | AnisoTexture | PointCloud | Scene, size: tuple[int, int] = (512, 512),
                    direction=DEFAULT_VIEW, fov: float = 40.0) -> Camera:  # fmt: skip
     """A camera from ``direction`` just far enough that the object fills an
     image of ``size`` (width, height): the framing of ``aniso3d render``."""
@@ -30,14 +31,15 @@ def framing_camera(thing: Mesh | AnisoTexture | PointCloud, size: tuple[int, int
 
 
 def render(
-    thing: Mesh | AnisoTexture | PointCloud,
+    thing: Mesh | AnisoTexture | PointCloud | Scene,
     camera: Camera | None = None,
     method: str | None = None,
     size: int | tuple[int, int] = 512,
     backend: str = "auto",
     **options,
 ) -> np.ndarray:
-    """(H, W, 3) uint8 image of ``thing`` (row 0 at the top).
+    """(H, W, 3) uint8 image of ``thing`` (row 0 at the top): a mesh, texture,
+    point cloud or :class:`~aniso3d.build.scene.Scene` of instances.
 
     ``method`` is "mesh", "volume" or "splat" (default: what the thing is);
     ``size`` is pixels, one number for a square or (width, height);

@@ -22,6 +22,13 @@ two bounded caches (:class:`~aniso3d.rendering.cache.Cache`: host memory and GPU
 memory), which hold the things weakly: a thing that is garbage-collected takes
 what was made from it along.
 
+A :class:`~aniso3d.build.scene.Scene` (many instances of a few meshes) is
+drawn by every method: each asset converted and uploaded once, every
+instance culled and, for splats and volume, given its own pyramid level, all
+at once (:mod:`~aniso3d.rendering.scene_draw`,
+:mod:`~aniso3d.rendering.instances`); ``last_lod_stats`` then holds the
+per-instance choices.
+
 ``resolution="auto"`` (a mesh drawn as volume or splats) converts it only as
 finely as the frame needs: :func:`~aniso3d.rendering.select.needed_resolution`
 of the camera, image size and mesh bounds (a power of two). A texture already
@@ -53,6 +60,7 @@ import numpy as np
 from aniso3d.build.mesh import Mesh
 from aniso3d.build.points import PointCloud
 from aniso3d.build.pyramid import LodPoints, Pyramid, pyramid
+from aniso3d.build.scene import Scene
 from aniso3d.build.texture import (
     DEFAULT_DIRECTIONS,
     DEFAULT_RESOLUTION,
@@ -441,11 +449,19 @@ class Renderer:
             b = replace(b, resolution=self.resolve_resolution(thing, camera, (w, h), b.directions))
         if b.lod and method not in ("splat", "volume"):
             raise InputError(f"level of detail applies to the splat and volume methods, not '{method}'")
-        if not b.lod and values.get("pixel_error", getattr(options, "pixel_error", None)) is not None:
+        lod_frame = b.lod or isinstance(thing, Scene)  # a scene's instances always choose a level
+        if not lod_frame and values.get("pixel_error", getattr(options, "pixel_error", None)) is not None:
             raise InputError("pixel_error applies with lod=True only")
         impl = self.method_renderer(method)
         opts = impl.Options.resolve(options, values)
-        handle = self.upload(thing, method, build=b)
+        if isinstance(thing, Scene):  # instances of shared assets: aniso3d.rendering.scene_draw
+            from aniso3d.rendering.scene_draw import draw_scene, upload_scene
+
+            handle = upload_scene(self, thing, method, b)
+            draw = lambda: draw_scene(impl, handle, view, fbo, opts)  # noqa: E731
+        else:
+            handle = self.upload(thing, method, build=b)
+            draw = lambda: impl.draw(handle, view, fbo=fbo, options=opts)  # noqa: E731
         near, far = camera.clip_range(handle.bounds)
         view = FrameView(camera, self.lighting, (fw, fh), near, far, ssaa)
         fbo = self._fbo((fw, fh))
@@ -454,10 +470,10 @@ class Renderer:
         self.gl.ctx.viewport = (0, 0, fw, fh)
         bg = self.lighting.background
         fbo.clear(bg[0], bg[1], bg[2], 0.0, depth=1.0)
-        stats = impl.draw(handle, view, fbo=fbo, options=opts)
+        stats = draw()
         raw = fbo.read(components=4, dtype="f1")
         self.last_frame_seconds = time.perf_counter() - t0
-        self.last_lod_stats = dict(stats.lod) if b.lod and stats.lod is not None else None
+        self.last_lod_stats = dict(stats.lod) if lod_frame and stats.lod is not None else None
         img = np.frombuffer(raw, dtype=np.uint8).reshape(fh, fw, 4)[::-1]
         if ssaa > 1:
             img = np.round(downsample(img.astype(np.float32), ssaa)).astype(np.uint8)

@@ -450,6 +450,10 @@ def describe_stats(stats: dict | None) -> str:
     culled, selection time."""
     if not stats:
         return ""
+    if "instances" in stats:  # a scene's frame
+        from aniso3d.rendering.instances import describe_instances
+
+        return describe_instances(stats)
     if "level" in stats:  # the volume: one level per frame
         return (
             f"LOD level {stats['level']} · voxel {stats['voxel_size']:.3g} = "

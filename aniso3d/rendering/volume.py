@@ -836,6 +836,10 @@ class VolumeRenderer:
         self.vao = gl.track(ctx.vertex_array(self.prog, []))
         #: The last pyramid frame's level choice (see :func:`~aniso3d.rendering.select.volume_level`).
         self.last_lod_stats: dict | None = None
+        #: Blend each frame "over" what the framebuffer holds, without depth
+        #: test or depth writes (a scene's instances, drawn back to front, with
+        #: a black background in the lighting: aniso3d.rendering.scene_draw).
+        self.blend_over = False
 
     def upload(self, texture: AnisoTexture | Pyramid) -> GPUVolume | GPULodVolume:
         """Upload a texture, or every level of a pyramid (:class:`GPULodVolume`)."""
@@ -949,6 +953,10 @@ class VolumeRenderer:
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
         # A pixel that never reaches alpha 0.5 writes depth 1.0, the clear value.
         ctx.depth_func = "<="
+        if self.blend_over:
+            ctx.enable(moderngl.BLEND)
+            ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
+            ctx.depth_func = "1"  # always
         try:
             self.vao.render(moderngl.TRIANGLES, vertices=3)
         finally:
