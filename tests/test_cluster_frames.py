@@ -168,6 +168,24 @@ def test_cli_frames_on_a_local_cluster(tmp_path, capsys):
         assert np.array_equal(load_png(tmp_path / "serial" / name), load_png(tmp_path / "dask" / name))
 
 
+def test_cli_video_from_a_local_cluster(tmp_path, capsys):
+    """Frames drawn on the cluster come back as arrays and go into one video, the same as drawn here."""
+    pytest.importorskip("distributed")
+    from PIL import Image
+
+    args = ["frames", "scene:lattice", "--frames", "3", "--size", "48", "--method", "splat", "-r", "16", "-q"]
+    assert main(args + ["-o", str(tmp_path / "serial.gif")]) == 0
+    assert main(args + ["-o", str(tmp_path / "dask.gif"), "--workers", "2"]) == 0
+    assert "drawn on a local Dask cluster of 2 workers" in capsys.readouterr().out
+    with Image.open(tmp_path / "serial.gif") as a, Image.open(tmp_path / "dask.gif") as b:
+        assert a.n_frames == b.n_frames == 3
+        for i in range(3):
+            a.seek(i)
+            b.seek(i)
+            assert np.array_equal(np.asarray(a.convert("RGB")), np.asarray(b.convert("RGB")))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dask.gif", "serial.gif"]  # no temporary left
+
+
 def test_missing_dask_is_one_clear_message(mesh, cams, tmp_path, capsys, monkeypatch):
     monkeypatch.setitem(sys.modules, "distributed", None)  # import fails
     for kw in ({"workers": 2}, {"client": object()}):
