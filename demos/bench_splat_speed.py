@@ -42,7 +42,6 @@ import plyfile
 
 import aniso3d
 from aniso3d import metrics
-from aniso3d.bench.cameras import crop_box
 from aniso3d.bench.corpus import corpus_cameras, view_direction
 from aniso3d.build import scenes
 from aniso3d.build.points import PointCloud
