@@ -38,7 +38,7 @@
 
 // Injected by render/volume.py: BRICK (brick edge in voxels), ALPHA_MAX
 // (coverage cap below 1 so the optical depth stays finite), T_MIN (early
-// termination), BIG (stands for an infinite ray parameter).
+// termination; T_MIN_PLAIN in the plain marching), BIG (stands for an infinite ray parameter).
 
 uniform vec2 u_size;
 uniform vec3 u_forward;
@@ -379,7 +379,7 @@ void main() {
     dda_init(o, t0, float(BRICK), ivec3(0), u_bricks, bcell, bstep, btmax, btdelta);
     float t = t0;
     int outer_max = u_bricks.x + u_bricks.y + u_bricks.z + 3;
-    for (int it = 0; it < outer_max && g_trans > T_MIN; ++it) {
+    for (int it = 0; it < outer_max && g_trans > T_MIN_PLAIN; ++it) {
         float tb_exit = min(min(btmax.x, btmax.y), btmax.z);
         float tb_end = min(tb_exit, t1);
         int bid = TOP((bcell.z * u_bricks.y + bcell.y) * u_bricks.x + bcell.x);
@@ -388,7 +388,7 @@ void main() {
             ivec3 vhi = min(lo + BRICK, u_shape);
             dda_init(o, t, 1.0, lo, vhi, cell, stp, tmax, tdelta);
             float ti = t;
-            for (int jt = 0; jt < 3 * BRICK + 3 && g_trans > T_MIN; ++jt) {
+            for (int jt = 0; jt < 3 * BRICK + 3 && g_trans > T_MIN_PLAIN; ++jt) {
                 float tx = min(min(tmax.x, tmax.y), tmax.z);
                 float te = min(tx, tb_end);
                 if (te > ti) {
