@@ -1,5 +1,7 @@
 #version 430
 // Volume renderer (b), fragment stage: one ray per pixel through the sparse
+// (PLAIN_MARCH: the first version, compositing inside the DDA; else each ray
+// finds its next occupied voxel, then composites it)
 // anisotropic texture, exact voxel chords by a two-level 3D DDA
 // (Amanatides-Woo over 8^3 bricks, then over the voxels of occupied bricks).
 //
@@ -18,7 +20,8 @@
 // pixel spans (radians, 2 tan(fov/2) / height) and u_sheet_pixels the voxel
 // sizes in pixels over which every sheet fades in (render/volume.py:
 // sheet_share); u_background RGB; the lighting uniforms of lighting.glsl.
-// In (SSBOs, laid out by aniso3d/rendering/volume.py:pack_volume):
+// In (laid out by aniso3d/rendering/volume.py:pack_volume; 2D textures t_top ...
+// t_dirs, TEX_WIDTH texels a row, or with PLAIN_MARCH the same arrays as SSBOs):
 //   0 top[]      int, brick id of each brick cell or -1 (x fastest)
 //   1 pool[]     int, voxel index of each cell of each brick or -1
 //   2 offs[]     uint, CSR offsets of each voxel's shading entries (M + 1)
@@ -480,6 +483,12 @@ void main() {
             if (bcell[a] < 0 || bcell[a] >= u_bricks[a]) alive = false;
         }
         if (v >= 0) composite(v, o + g_d * tv - vec3(vcell), tv, chord);
+    }
+    // Stopped early: what is left behind takes the colour seen so far
+    // (an opaque surface keeps its own colour, not a trace of the background).
+    if (g_trans <= T_MIN) {
+        g_color /= 1.0 - g_trans;
+        g_trans = 0.0;
     }
 #endif
 

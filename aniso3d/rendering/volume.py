@@ -6,6 +6,11 @@ float64 (:func:`ray_base`), never from the eye's float32 position, so a
 camera 1e7 radii away loses nothing. A two-level 3D DDA (Amanatides-Woo over
 8^3 bricks, then over the voxels of occupied bricks) gives each voxel's exact
 chord, so nothing depends on a step size and an empty brick costs one lookup.
+The arrays live in 2D textures (texelFetch; llvmpipe reads a storage buffer
+lane by lane), and each ray first finds its next occupied voxel, then
+composites it, so that a SIMD batch of pixels composites together
+(``march="skip"``); ``march="plain"`` keeps the first version for comparison
+(docs/volume_speed.md).
 
 A voxel seen along the unit ray direction w (METHOD.md "Reference
 conventions"), with ``P(w) = |wx| + |wy| + |wz|`` and h the voxel edge:
@@ -50,7 +55,8 @@ conventions"), with ``P(w) = |wx| + |wy| + |wz|`` and h the voxel edge:
   paper's reading); each shaded colour is clamped to [0, 1] first, as the
   polygon renderer clamps each fragment.
 
-Front to back, stopping when T falls below :data:`T_MIN`. The pixel is
+Front to back, stopping when T falls below :data:`T_MIN` (the rest then
+takes the colour seen so far: ``C / (1 - T)``, T = 0). The pixel is
 ``C + T * background`` (C premultiplied), alpha ``1 - T``, and the depth is
 where ``1 - T`` first reaches 0.5 (1.0, the clear value, if it never does).
 
@@ -100,8 +106,9 @@ from aniso3d.rendering.select import volume_level
 BRICK = 8
 #: Coverage cap: a voxel at full coverage lets 1e-6 through along its mean chord.
 ALPHA_MAX = 1.0 - 1e-6
-#: Early ray termination: stop when the transmittance falls below this. What
-#: is left changes a pixel by at most this much (0.005 = 1.3 / 255).
+#: Early ray termination: stop when the transmittance falls below this, and
+#: give what is left the colour seen so far (C / (1 - T), alpha 1): a pixel
+#: changes by at most this much (0.005 = 1.3 / 255), an opaque surface not at all.
 T_MIN = 5e-3
 #: ... as first written, in the "plain" marching (:data:`MARCH_MODES`).
 T_MIN_PLAIN = 1e-3
@@ -660,6 +667,8 @@ def trace_ray_np(
             out.t50 = (ti + _t50_offset(opacity, T, seg, sigma, chord, st, k)) * h
         C += seg * col
         T -= seg
+    if T <= T_MIN:  # stopped early: the rest takes the colour seen so far, as on the GPU
+        C, T = C / (1.0 - T), 0.0
     out.rgb = np.clip(C + T * bg, 0.0, 1.0)
     out.alpha = float(np.clip(1.0 - T, 0.0, 1.0))
     return out
