@@ -1,5 +1,7 @@
 #version 430
 // Volume renderer (b), fragment stage: one ray per pixel through the sparse
+// (PLAIN_MARCH: the first version, compositing inside the DDA; else each ray
+// finds its next occupied voxel, then composites it)
 // anisotropic texture, exact voxel chords by a two-level 3D DDA
 // (Amanatides-Woo over 8^3 bricks, then over the voxels of occupied bricks).
 //
@@ -18,7 +20,8 @@
 // pixel spans (radians, 2 tan(fov/2) / height) and u_sheet_pixels the voxel
 // sizes in pixels over which every sheet fades in (render/volume.py:
 // sheet_share); u_background RGB; the lighting uniforms of lighting.glsl.
-// In (SSBOs, laid out by aniso3d/rendering/volume.py:pack_volume):
+// In (laid out by aniso3d/rendering/volume.py:pack_volume; 2D textures t_top ...
+// t_dirs, TEX_WIDTH texels a row, or with PLAIN_MARCH the same arrays as SSBOs):
 //   0 top[]      int, brick id of each brick cell or -1 (x fastest)
 //   1 pool[]     int, voxel index of each cell of each brick or -1
 //   2 offs[]     uint, CSR offsets of each voxel's shading entries (M + 1)
@@ -38,7 +41,7 @@
 
 // Injected by render/volume.py: BRICK (brick edge in voxels), ALPHA_MAX
 // (coverage cap below 1 so the optical depth stays finite), T_MIN (early
-// termination), BIG (stands for an infinite ray parameter).
+// termination; T_MIN_PLAIN in the plain marching), BIG (stands for an infinite ray parameter).
 
 uniform vec2 u_size;
 uniform vec3 u_forward;
@@ -61,12 +64,45 @@ uniform float u_pixel_angle;
 uniform vec2 u_sheet_pixels;
 uniform vec3 u_background;
 
+#ifdef PLAIN_MARCH
 layout(std430, binding = 0) readonly buffer TopIndex { int top[]; };
 layout(std430, binding = 1) readonly buffer BrickPool { int pool[]; };
 layout(std430, binding = 2) readonly buffer Offsets { uint offs[]; };
 layout(std430, binding = 3) readonly buffer Density { uint dens[]; };
 layout(std430, binding = 4) readonly buffer Entries { uvec4 ent[]; };
 layout(std430, binding = 5) readonly buffer Directions { vec4 dirs[]; };
+#define TOP(i) top[i]
+#define POOL(i) pool[i]
+#define OFFS(i) offs[i]
+#define ENT(i) ent[i]
+#define DIR(i) dirs[i]
+
+float density_at(int v, int p) {
+    int i = v * u_num_dirs + p;
+    vec2 pair = unpackHalf2x16(dens[i >> 1]);
+    return (i & 1) == 0 ? pair.x : pair.y;
+}
+#else
+// The same arrays as 2D textures TEX_WIDTH texels wide, element i at texel
+// (i mod TEX_WIDTH, i div TEX_WIDTH); the density as float16 texels.
+uniform isampler2D t_top;
+uniform isampler2D t_pool;
+uniform usampler2D t_offs;
+uniform sampler2D t_dens;
+uniform usampler2D t_ent;
+uniform sampler2D t_dirs;
+ivec2 texel(int i) { return ivec2(i & (TEX_WIDTH - 1), i >> TEX_SHIFT); }
+ivec2 texel(uint i) { return ivec2(int(i & uint(TEX_WIDTH - 1)), int(i >> uint(TEX_SHIFT))); }
+#define TOP(i) texelFetch(t_top, texel(i), 0).x
+#define POOL(i) texelFetch(t_pool, texel(i), 0).x
+#define OFFS(i) texelFetch(t_offs, texel(i), 0).x
+#define ENT(i) texelFetch(t_ent, texel(i), 0)
+#define DIR(i) texelFetch(t_dirs, texel(i), 0)
+
+float density_at(int v, int p) {
+    return texelFetch(t_dens, texel(v * u_num_dirs + p), 0).x;
+}
+#endif
 
 out vec4 f_color;
 
@@ -84,12 +120,6 @@ float g_dist0;     // distance (grid units) from the eye to the ray's origin o
 float g_t50;       // ray parameter (grid units, from o) where 1 - T reached 0.5
 bool g_has50;      // whether it did (t can be negative: o may lie past near)
 
-float density_at(int v, int p) {
-    int i = v * u_num_dirs + p;
-    vec2 pair = unpackHalf2x16(dens[i >> 1]);
-    return (i & 1) == 0 ? pair.x : pair.y;
-}
-
 // The 4 samples nearest the line of w (density is even: D(w) = D(-w), so a
 // sample N_p also stands at -N_p) and Franke-Little weights
 // ((R - a) / (R a))^2 with R the angle of the 5th nearest: continuous in w,
@@ -98,7 +128,7 @@ void neighbours(vec3 w) {
     float bd[5] = float[5](-1.0, -1.0, -1.0, -1.0, -1.0);
     int bi[5] = int[5](0, 0, 0, 0, 0);
     for (int p = 0; p < u_num_dirs; ++p) {
-        float c = abs(dot(dirs[p].xyz, w));
+        float c = abs(dot(DIR(p).xyz, w));
         if (c > bd[4]) {
             int j = 4;
             while (j > 0 && c > bd[j - 1]) {
@@ -116,7 +146,7 @@ void neighbours(vec3 w) {
     float a0 = acos(clamp(bd[0], 0.0, 1.0));
     for (int j = 0; j < 4; ++j) {
         g_nb[j] = bi[j];
-        g_nbdir[j] = dirs[bi[j]].xyz;
+        g_nbdir[j] = DIR(bi[j]).xyz;
         if (j < k) {
             float a = max(acos(clamp(bd[j], 0.0, 1.0)), 1e-6);
             wt[j] = a < radius ? pow((radius - a) / (radius * a), 2.0) : 0.0;
@@ -131,8 +161,8 @@ void neighbours(vec3 w) {
 // Add voxel v, crossed over ray parameters [t0, t0 + chord] (grid units)
 // from the voxel-local point x_in (the voxel is the unit cube).
 void composite(int v, vec3 x_in, float t0, float chord) {
-    uint e0 = offs[v];
-    uint e1 = offs[v + 1];
+    uint e0 = OFFS(v);
+    uint e1 = OFFS(v + 1);
     float base_w = 0.0;        // sum A |n . w|: the facets' own projected area
     vec4 base_nb = vec4(0.0);  // the same at the 4 neighbour samples
     vec3 col_w = vec3(0.0);
@@ -153,8 +183,8 @@ void composite(int v, vec3 x_in, float t0, float chord) {
     float sum_f = 0.0;
     vec3 view = -g_d;
     for (uint e = e0; e < e1; ++e) {
-        uvec4 a = ent[3u * e];
-        uvec4 b = ent[3u * e + 1u];
+        uvec4 a = ENT(3u * e);
+        uvec4 b = ENT(3u * e + 1u);
         vec3 n = uintBitsToFloat(a.xyz);
         float area = uintBitsToFloat(a.w);
         vec2 kd_rg = unpackHalf2x16(b.x);
@@ -162,7 +192,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
         float shininess = uintBitsToFloat(b.z);
         base_w += area * abs(dot(n, g_d));
         base_nb += area * abs(n * g_nbdir);
-        vec3 ns = u_normal_mode == 0 ? n : dirs[b.w].xyz;
+        vec3 ns = u_normal_mode == 0 ? n : DIR(b.w).xyz;
         float wgt = area * abs(dot(ns, g_d));
         // The mean normal's length is its facets' coherence (lighting.glsl).
         vec3 c = clamp(shade(ns, view, vec3(kd_rg, kd_b_ks.x), kd_b_ks.y, shininess, length(n)), 0.0, 1.0);
@@ -171,7 +201,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
         col_a += area * c;
         sum_a += area;
         if (sheets) {
-            uvec4 sh = ent[3u * e + 2u];
+            uvec4 sh = ENT(3u * e + 2u);
             vec2 fill_share = unpackHalf2x16(sh.y);
             float share = 1.0 - (1.0 - fill_share.y) * (1.0 - zoom);
             float fill = share * fill_share.x;
@@ -347,26 +377,27 @@ void main() {
     g_t50 = 0.0;
     g_has50 = false;
 
+#ifdef PLAIN_MARCH
     ivec3 bcell, bstep, cell, stp;
     vec3 btmax, btdelta, tmax, tdelta;
     dda_init(o, t0, float(BRICK), ivec3(0), u_bricks, bcell, bstep, btmax, btdelta);
     float t = t0;
     int outer_max = u_bricks.x + u_bricks.y + u_bricks.z + 3;
-    for (int it = 0; it < outer_max && g_trans > T_MIN; ++it) {
+    for (int it = 0; it < outer_max && g_trans > T_MIN_PLAIN; ++it) {
         float tb_exit = min(min(btmax.x, btmax.y), btmax.z);
         float tb_end = min(tb_exit, t1);
-        int bid = top[(bcell.z * u_bricks.y + bcell.y) * u_bricks.x + bcell.x];
+        int bid = TOP((bcell.z * u_bricks.y + bcell.y) * u_bricks.x + bcell.x);
         if (bid >= 0 && tb_end > t) {
             ivec3 lo = bcell * BRICK;
             ivec3 vhi = min(lo + BRICK, u_shape);
             dda_init(o, t, 1.0, lo, vhi, cell, stp, tmax, tdelta);
             float ti = t;
-            for (int jt = 0; jt < 3 * BRICK + 3 && g_trans > T_MIN; ++jt) {
+            for (int jt = 0; jt < 3 * BRICK + 3 && g_trans > T_MIN_PLAIN; ++jt) {
                 float tx = min(min(tmax.x, tmax.y), tmax.z);
                 float te = min(tx, tb_end);
                 if (te > ti) {
                     ivec3 lc = cell - lo;
-                    int v = pool[bid * BRICK * BRICK * BRICK + (lc.z * BRICK + lc.y) * BRICK + lc.x];
+                    int v = POOL(bid * BRICK * BRICK * BRICK + (lc.z * BRICK + lc.y) * BRICK + lc.x);
                     if (v >= 0) composite(v, o + g_d * ti - vec3(cell), ti, te - ti);
                     ti = te;
                 }
@@ -384,6 +415,83 @@ void main() {
         btmax[a] += btdelta[a];
         if (bcell[a] < 0 || bcell[a] >= u_bricks[a]) break;
     }
+
+#else
+    ivec3 bcell, bstep, cell, stp, lo, vhi;
+    vec3 btmax, btdelta, tmax, tdelta;
+    dda_init(o, t0, float(BRICK), ivec3(0), u_bricks, bcell, bstep, btmax, btdelta);
+    float t = t0;         // brick level: where the ray stands (as in the plain loop)
+    float ti = t0;        // voxel level, inside the current brick
+    float tb_exit = 0.0;  // where the ray leaves the current brick
+    float tb_end = 0.0;   // ... or t1, if sooner
+    int bid = -1;
+    bool in_brick = false;
+    bool alive = true;
+    int budget = (u_bricks.x + u_bricks.y + u_bricks.z + 3) * (3 * BRICK + 4);
+    while (alive && g_trans > T_MIN) {
+        // Find the ray's next occupied voxel, then composite it: every pixel
+        // of a SIMD batch composites at once (a composite per loop turn, not
+        // one per DDA step that some lane happens to need).
+        int v = -1;
+        float tv = 0.0;
+        float chord = 0.0;
+        ivec3 vcell = ivec3(0);
+        while (v < 0 && alive) {
+            if (--budget < 0) {
+                alive = false;
+                break;
+            }
+            if (!in_brick) {
+                tb_exit = min(min(btmax.x, btmax.y), btmax.z);
+                tb_end = min(tb_exit, t1);
+                bid = TOP((bcell.z * u_bricks.y + bcell.y) * u_bricks.x + bcell.x);
+                if (bid >= 0 && tb_end > t) {
+                    lo = bcell * BRICK;
+                    vhi = min(lo + BRICK, u_shape);
+                    dda_init(o, t, 1.0, lo, vhi, cell, stp, tmax, tdelta);
+                    ti = t;
+                    in_brick = true;
+                    continue;
+                }
+            } else {
+                float tx = min(min(tmax.x, tmax.y), tmax.z);
+                float te = min(tx, tb_end);
+                if (te > ti) {
+                    ivec3 lc = cell - lo;
+                    v = POOL(bid * BRICK * BRICK * BRICK + (lc.z * BRICK + lc.y) * BRICK + lc.x);
+                    tv = ti;
+                    chord = te - ti;
+                    vcell = cell;
+                    ti = te;
+                }
+                if (tx < tb_end) {
+                    int a = min_axis(tmax);
+                    cell[a] += stp[a];
+                    tmax[a] += tdelta[a];
+                    if (cell[a] >= lo[a] && cell[a] < vhi[a]) continue;
+                }
+                in_brick = false;
+            }
+            // Leave the brick.
+            t = max(t, tb_end);
+            if (tb_exit >= t1) {
+                alive = false;
+                break;
+            }
+            int a = min_axis(btmax);
+            bcell[a] += bstep[a];
+            btmax[a] += btdelta[a];
+            if (bcell[a] < 0 || bcell[a] >= u_bricks[a]) alive = false;
+        }
+        if (v >= 0) composite(v, o + g_d * tv - vec3(vcell), tv, chord);
+    }
+    // Stopped early: what is left behind takes the colour seen so far
+    // (an opaque surface keeps its own colour, not a trace of the background).
+    if (g_trans <= T_MIN) {
+        g_color /= 1.0 - g_trans;
+        g_trans = 0.0;
+    }
+#endif
 
     vec3 rgb = clamp(g_color + g_trans * u_background, 0.0, 1.0);
     f_color = vec4(rgb, clamp(1.0 - g_trans, 0.0, 1.0));

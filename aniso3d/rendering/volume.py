@@ -6,6 +6,11 @@ float64 (:func:`ray_base`), never from the eye's float32 position, so a
 camera 1e7 radii away loses nothing. A two-level 3D DDA (Amanatides-Woo over
 8^3 bricks, then over the voxels of occupied bricks) gives each voxel's exact
 chord, so nothing depends on a step size and an empty brick costs one lookup.
+The arrays live in 2D textures (texelFetch; llvmpipe reads a storage buffer
+lane by lane), and each ray first finds its next occupied voxel, then
+composites it, so that a SIMD batch of pixels composites together
+(``march="skip"``); ``march="plain"`` keeps the first version for comparison
+(docs/volume_speed.md).
 
 A voxel seen along the unit ray direction w (METHOD.md "Reference
 conventions"), with ``P(w) = |wx| + |wy| + |wz|`` and h the voxel edge:
@@ -50,7 +55,8 @@ conventions"), with ``P(w) = |wx| + |wy| + |wz|`` and h the voxel edge:
   paper's reading); each shaded colour is clamped to [0, 1] first, as the
   polygon renderer clamps each fragment.
 
-Front to back, stopping when T falls below :data:`T_MIN`. The pixel is
+Front to back, stopping when T falls below :data:`T_MIN` (the rest then
+takes the colour seen so far: ``C / (1 - T)``, T = 0). The pixel is
 ``C + T * background`` (C premultiplied), alpha ``1 - T``, and the depth is
 where ``1 - T`` first reaches 0.5 (1.0, the clear value, if it never does).
 
@@ -100,12 +106,21 @@ from aniso3d.rendering.select import volume_level
 BRICK = 8
 #: Coverage cap: a voxel at full coverage lets 1e-6 through along its mean chord.
 ALPHA_MAX = 1.0 - 1e-6
-#: Early ray termination: stop when the transmittance falls below this.
-T_MIN = 1e-3
+#: Early ray termination: stop when the transmittance falls below this, and
+#: give what is left the colour seen so far (C / (1 - T), alpha 1): a pixel
+#: changes by at most this much (0.005 = 1.3 / 255), an opaque surface not at all.
+T_MIN = 5e-3
+#: ... as first written, in the "plain" marching (:data:`MARCH_MODES`).
+T_MIN_PLAIN = 1e-3
 #: Density samples interpolated per ray direction.
 NEIGHBOURS = 4
 
 STEPS = ("dda",)
+#: How the rays find the occupied voxels: "skip" (default) finds each ray's
+#: next occupied voxel before compositing it, so that a batch of pixels
+#: composites together; "plain" composites inside the DDA, as first written
+#: (kept for comparison, demos/bench_volume_speed.py). The same image.
+MARCH_MODES = ("skip", "plain")
 DENSITY_MODES = ("facet", "kernel", "nearest")
 NORMAL_MODES = ("mean", "sample")
 OPACITY_MODES = ("exponential", "linear", "split", "planar")
@@ -131,6 +146,19 @@ SHEET_FILL = (0.7, 0.95)
 SHEET_PIXELS = (1.0, 3.0)
 #: uint32 words per shading entry on the GPU (three uvec4; see volume.frag).
 ENTRY_WORDS = 12
+#: Width in texels of the 2D textures the arrays of :func:`pack_volume` are
+#: uploaded as (a power of two: the shader splits an index with a mask and a shift).
+TEX_WIDTH = 4096
+#: Each array's texture: its sampler in volume.frag, the dtype and components
+#: of a texel, and what pads an empty array (-1: "no brick", "no voxel").
+_TEXTURES = {
+    "top": ("t_top", "i4", 1, -1),
+    "pool": ("t_pool", "i4", 1, -1),
+    "offsets": ("t_offs", "u4", 1, 0),
+    "density": ("t_dens", "f2", 1, 0),
+    "entries": ("t_ent", "u4", 4, 0),
+    "directions": ("t_dirs", "f4", 4, 0),
+}
 #: OpenGL version the shaders need (shader storage buffers).
 REQUIRE_GL = 430
 _BIG = 1e30
@@ -638,6 +666,8 @@ def trace_ray_np(
             out.t50 = (ti + _t50_offset(opacity, T, seg, sigma, chord, st, k)) * h
         C += seg * col
         T -= seg
+    if T <= T_MIN:  # stopped early: the rest takes the colour seen so far, as on the GPU
+        C, T = C / (1.0 - T), 0.0
     out.rgb = np.clip(C + T * bg, 0.0, 1.0)
     out.alpha = float(np.clip(1.0 - T, 0.0, 1.0))
     return out
@@ -738,11 +768,13 @@ def pack_volume(texture: AnisoTexture) -> dict[str, np.ndarray]:
 
 @dataclass(eq=False)
 class GPUVolume:
-    """A texture uploaded once: six shader storage buffers (bindings 0-5, in
-    the order of :func:`pack_volume`) and the grid's geometry. ``origin`` is
-    the grid centre."""
+    """A texture uploaded once: the arrays of :func:`pack_volume` as 2D
+    textures (``textures``, :data:`TEX_WIDTH` texels wide, texture units 0-5
+    in that order) and the grid's geometry; ``buffers`` the same arrays as
+    shader storage buffers (bindings 0-5), made only when the "plain"
+    marching first draws it. ``origin`` is the grid centre."""
 
-    buffers: dict[str, moderngl.Buffer]
+    textures: dict[str, moderngl.Texture]
     origin: np.ndarray
     bounds: np.ndarray
     grid_origin: np.ndarray
@@ -752,10 +784,12 @@ class GPUVolume:
     n_directions: int
     n_voxels: int
     sizes: dict[str, int]
+    buffers: dict[str, moderngl.Buffer] = field(default_factory=dict)
 
     @property
     def nbytes(self) -> int:
-        """Bytes uploaded to the GPU."""
+        """Bytes of the arrays uploaded to the GPU (textures; the plain
+        marching's storage buffers come on top)."""
         return int(sum(self.sizes.values()))
 
 
@@ -789,6 +823,8 @@ class VolumeOptions(DrawOptions):
         opacity: how coverage adds up along the ray, one of :data:`OPACITY_MODES`.
         pixel_error: pyramid uploads only: the largest a voxel of the level
             drawn may be on screen, framebuffer pixels (None: 1).
+        march: how the rays find the occupied voxels, one of :data:`MARCH_MODES`
+            (the same image; "plain" is the slower first version).
     """
 
     what: ClassVar[str] = "volume"
@@ -798,9 +834,11 @@ class VolumeOptions(DrawOptions):
     normal: str = "mean"
     opacity: str = DEFAULT_OPACITY
     pixel_error: float | None = None
+    march: str = "skip"
 
     def __post_init__(self) -> None:
         _check_choice(self.step, STEPS, "volume step")
+        _check_choice(self.march, MARCH_MODES, "volume marching")
         _check_choice(self.density, DENSITY_MODES, "density reading")
         _check_choice(self.normal, NORMAL_MODES, "normal")
         _check_choice(self.opacity, OPACITY_MODES, "opacity law")
@@ -830,10 +868,16 @@ class VolumeRenderer:
             "BRICK": BRICK,
             "ALPHA_MAX": float(np.float32(ALPHA_MAX)),
             "T_MIN": T_MIN,
+            "T_MIN_PLAIN": T_MIN_PLAIN,
             "BIG": _BIG,
+            "TEX_WIDTH": TEX_WIDTH,
+            "TEX_SHIFT": TEX_WIDTH.bit_length() - 1,
         }
+        self._defines = defines
         self.prog = gl.program("volume.vert", "volume.frag", defines=defines)
         self.vao = gl.track(ctx.vertex_array(self.prog, []))
+        #: Program and vertex array of the other marching modes, made when first drawn.
+        self._variants: dict[str, tuple[moderngl.Program, moderngl.VertexArray]] = {}
         #: The last pyramid frame's level choice (see :func:`~aniso3d.rendering.select.volume_level`).
         self.last_lod_stats: dict | None = None
         #: Blend each frame "over" what the framebuffer holds, without depth
@@ -865,22 +909,19 @@ class VolumeRenderer:
                     f"grid {tuple(int(s) for s in texture.shape)}); "
                     "lower --resolution or --directions"
                 )
-        ctx = self.gl.ctx
-        buffers: dict[str, moderngl.Buffer] = {}
+        textures: dict[str, moderngl.Texture] = {}
         try:
             for name, arr in arrays.items():
-                # An empty buffer cannot be made; 16 bytes of -1/0 read as "nothing".
-                data = arr.tobytes() if arr.nbytes else np.full(4, -1, np.int32).tobytes()
-                buffers[name] = self.gl.track(ctx.buffer(data))
+                textures[name] = self.gl.track(_array_texture(self.gl.ctx, arr, *_TEXTURES[name][1:]))
         except moderngl.Error as exc:
-            self.gl.free(*buffers.values())
+            self.gl.free(*textures.values())
             raise ResourceError(
                 f"uploading the volume failed (out of GPU memory?): {exc}"
             ) from None
         bounds = texture.bounds
         shape = np.asarray(texture.shape, dtype=np.int64)
         return GPUVolume(
-            buffers=buffers,
+            textures=textures,
             origin=0.5 * (bounds[0] + bounds[1]),
             bounds=bounds,
             grid_origin=np.asarray(texture.origin, dtype=np.float64),
@@ -920,12 +961,13 @@ class VolumeRenderer:
             handle = handle.levels[level]
         elif opts.pixel_error is not None:
             raise InputError("pixel_error applies to a pyramid upload only (upload a Pyramid)")
+        prog, vao = self._program(opts.march)
         cam = view.camera
         right, up, forward = cam.basis()
         t = float(np.tan(np.radians(cam.fov) / 2))
         rays = ray_base(handle, cam.position, forward, view.near, view.far)
         GLContext.set_uniforms(
-            self.prog,
+            prog,
             {
                 "u_size": (float(view.size[0]), float(view.size[1])),
                 "u_forward": tuple(map(float, forward)),
@@ -945,9 +987,15 @@ class VolumeRenderer:
                 "u_background": tuple(float(c) for c in view.lighting.background),
             },
         )
-        GLContext.set_uniforms(self.prog, view.lighting.uniforms(), strict=False)
-        for binding, buf in enumerate(handle.buffers.values()):
-            buf.bind_to_storage_buffer(binding)
+        GLContext.set_uniforms(prog, view.lighting.uniforms(), strict=False)
+        if opts.march == "plain":
+            for binding, buf in enumerate(self._storage_buffers(handle).values()):
+                buf.bind_to_storage_buffer(binding)
+        else:
+            samplers = {_TEXTURES[name][0]: unit for unit, name in enumerate(handle.textures)}
+            GLContext.set_uniforms(prog, samplers, strict=False)
+            for unit, tex in enumerate(handle.textures.values()):
+                tex.use(location=unit)
         ctx = self.gl.ctx
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
@@ -958,25 +1006,76 @@ class VolumeRenderer:
             ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
             ctx.depth_func = "1"  # always
         try:
-            self.vao.render(moderngl.TRIANGLES, vertices=3)
+            vao.render(moderngl.TRIANGLES, vertices=3)
         finally:
             ctx.depth_func = "<"
         if stats is None:
             return DrawStats(drawn=int(handle.n_voxels), unit="voxels")
         return DrawStats(drawn=int(handle.n_voxels), unit="voxels", levels=(int(stats["level"]),), lod=stats)
 
+    def _program(self, march: str) -> tuple[moderngl.Program, moderngl.VertexArray]:
+        """The program and vertex array of a marching mode (:data:`MARCH_MODES`)."""
+        if march == MARCH_MODES[0]:
+            return self.prog, self.vao
+        if march not in self._variants:
+            prog = self.gl.program("volume.vert", "volume.frag", defines={**self._defines, "PLAIN_MARCH": 1})
+            self._variants[march] = (prog, self.gl.track(self.gl.ctx.vertex_array(prog, [])))
+        return self._variants[march]
+
+    def _storage_buffers(self, handle: GPUVolume) -> dict[str, moderngl.Buffer]:
+        """The plain marching's storage buffers of ``handle``, read back from
+        its textures the first time (the same bytes)."""
+        if not handle.buffers:
+            try:
+                for name, tex in handle.textures.items():
+                    n = handle.sizes[name]
+                    # An empty buffer cannot be made; 16 bytes of -1/0 read as "nothing".
+                    data = tex.read()[:n] if n else np.full(4, -1, np.int32).tobytes()
+                    handle.buffers[name] = self.gl.track(self.gl.ctx.buffer(data))
+            except moderngl.Error as exc:
+                self.gl.free(*handle.buffers.values())
+                handle.buffers.clear()
+                raise ResourceError(f"uploading the volume failed (out of GPU memory?): {exc}") from None
+        return handle.buffers
+
     def release(self, handle: GPUVolume | GPULodVolume) -> None:
         if isinstance(handle, GPULodVolume):
             for level in handle.levels:
                 self.release(level)
             return
-        self.gl.free(*handle.buffers.values())
+        self.gl.free(*handle.textures.values(), *handle.buffers.values())
+        handle.textures.clear()
         handle.buffers.clear()
 
     def release_all(self) -> None:
         """Free the renderer's own GPU objects (the programs stay cached in the context)."""
-        self.gl.free(self.vao)
+        self.gl.free(self.vao, *(vao for _, vao in self._variants.values()))
         self.vao = None
+        self._variants.clear()
+
+
+def _array_texture(ctx: moderngl.Context, arr: np.ndarray, dtype: str, comps: int, empty: int) -> moderngl.Texture:
+    """``arr`` (its bytes read as texels of ``comps`` components of ``dtype``)
+    as a 2D texture :data:`TEX_WIDTH` texels wide (narrower if it has fewer
+    texels), element i at texel (i mod width, i div width); an empty array is
+    one texel of ``empty``."""
+    flat = np.frombuffer(arr.tobytes(), dtype=np.dtype(dtype))
+    flat = flat.reshape(-1, comps) if len(flat) else np.full((1, comps), empty, dtype=flat.dtype)
+    n = len(flat)
+    width = min(n, TEX_WIDTH)
+    rows = -(-n // width)
+    limit = int(ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384))
+    if rows > limit:
+        raise ResourceError(
+            f"a volume array of {n} texels does not fit a {TEX_WIDTH} x {limit} texture; "
+            "lower --resolution or --directions"
+        )
+    data = np.zeros((rows * width, comps), dtype=flat.dtype)
+    data[:n] = flat
+    tex = ctx.texture((width, rows), comps, data.tobytes(), dtype=dtype)
+    tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+    tex.repeat_x = tex.repeat_y = False
+    return tex
 
 
 def ray_base(
