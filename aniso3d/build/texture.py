@@ -86,6 +86,13 @@ def sphere_directions(k: int, kind: str = "fibonacci", seed: int = 0) -> np.ndar
 # ------------------------------------------------------------------------ texture
 
 
+#: ``meta`` key set on a texture whose fields went through the compact
+#: encoding (loaded from a compact file, or :meth:`AnisoTexture.as_stored`):
+#: its centroids and normals carry the encoding's rounding, which the volume
+#: renderer's sheet crossings allow for (:func:`aniso3d.rendering.volume.entry_sheets`).
+QUANTISED = "quantised"
+
+
 @dataclass(frozen=True, eq=False)
 class AnisoTexture:
     """A sparse anisotropic 3D texture (density and shading spheres per voxel).
@@ -208,7 +215,7 @@ class AnisoTexture:
         quantised and decoded; see :mod:`aniso3d.build.encoding` for the
         error of each)."""
         members, params = encode(self._arrays(), self.voxel_size, bits)
-        return AnisoTexture(voxel_size=self.voxel_size, meta=dict(self.meta),
+        return AnisoTexture(voxel_size=self.voxel_size, meta={**self.meta, QUANTISED: True},
                             **decode(members, params, self.voxel_size))  # fmt: skip
 
     def _arrays(self) -> dict[str, np.ndarray]:
@@ -273,8 +280,9 @@ class AnisoTexture:
         """Read a file written by :meth:`save` (any version up to the current
         one); refuse foreign, damaged or newer files."""
         f = read_texture_file(path)
+        meta = {**f.meta, QUANTISED: True} if f.encoding == "compact" else f.meta
         try:
-            return cls(voxel_size=f.voxel_size, meta=f.meta, **f.arrays)
+            return cls(voxel_size=f.voxel_size, meta=meta, **f.arrays)
         except FormatError as exc:
             raise FormatError(f"'{Path(path)}' is damaged: {exc}; rebuild it from its mesh") from None
 

@@ -93,7 +93,7 @@ import moderngl
 import numpy as np
 
 from aniso3d.build.pyramid import Pyramid
-from aniso3d.build.texture import AnisoTexture
+from aniso3d.build.texture import QUANTISED, AnisoTexture
 from aniso3d.errors import InputError, ResourceError
 from aniso3d.grid import cell_keys
 from aniso3d.rendering.base import DrawOptions, number, option_parser
@@ -130,6 +130,11 @@ DEFAULT_OPACITY = "planar"
 #: crosses a sheet within it of a voxel face counts in both voxels, never in
 #: neither (float32 puts the same point a few 1e-5 apart in the two voxels).
 SHEET_EPS = 1e-3
+#: Extra crossing tolerance of a sheet (times its share) in a texture whose
+#: centroids and normals went through the compact encoding: without it, rays
+#: slip between neighbouring voxels' rounded planes (up to -4.5 dB on a
+#: sphere); chosen on the corpus with demos/bench_encoding.py (docs/encoding.md).
+SHEET_QUANTISED = 0.02
 #: Extra crossing tolerance per unit spread of an entry's normals (see
 #: :class:`EntrySheets`).
 SHEET_BEND = 1.0
@@ -415,6 +420,10 @@ def entry_sheets(texture: AnisoTexture, voxels: np.ndarray | None = None) -> Ent
     share = _ramp(np.maximum(own, together[owner]), SHEET_FILL)
     spread = np.clip(1.0 - np.linalg.norm(n, axis=1), 0.0, 1.0)
     slack = SHEET_EPS + SHEET_BEND * np.sqrt(spread) * np.clip(1.0 - spread / SHEET_BEND_MAX, 0.0, 1.0)
+    if texture.meta.get(QUANTISED):
+        # Rounded centroids and normals move neighbouring voxels' planes apart
+        # by up to a few 1e-2 voxel where they meet: sheets widen by that.
+        slack = slack + SHEET_QUANTISED * share
     # Fill and share as the GPU stores them (float16): where the sheets bring
     # a ray's transmittance to about 0.5, its depth hangs on the last digit.
     fill = np.clip(fill, 0.0, 1.0).astype(np.float16).astype(np.float64)
