@@ -72,6 +72,7 @@ def check_view_arguments(args) -> None:
     """One :class:`~aniso3d.errors.InputError` for a bad combination of the
     input, ``--scene``, ``--trees`` and the point-cloud options (before any
     window or file is opened)."""
+    from aniso3d.build.scene import GLTF_SUFFIXES
     from aniso3d.errors import InputError
 
     points = point_cloud_options(args)
@@ -81,6 +82,8 @@ def check_view_arguments(args) -> None:
         if points:
             flags = ", ".join("--" + k.replace("_", "-") for k in points)
             raise InputError(f"{flags} for PLY point clouds only; --scene is not one")
+        if args.scene != "forest" and Path(args.scene).suffix.lower() not in GLTF_SUFFIXES:
+            load_scene_input(args.scene)  # its one error for anything else
         if args.trees is not None and args.scene != "forest":
             raise InputError(f"--trees applies to --scene forest, not to --scene '{args.scene}'")
     elif args.trees is not None:
