@@ -481,3 +481,46 @@ def test_window_picks_the_resolution_its_start_view_needs(xserver, tmp_path):
         assert s.close("q") == 0, s.log()
     finally:
         s.kill()
+
+
+@pytest.mark.xvfb
+def test_window_on_a_forest_draws_every_method(xserver, tmp_path):
+    """``aniso3d view --scene forest --trees 3``: the scene's instances in
+    each of the three renderers, each frame the headless renderer's picture
+    of the scene from the viewer's start view, and the overlay's instance
+    and draw lines."""
+    forest = scenes.forest(3)
+    size = (320, 240)
+    s = Session(xserver, tmp_path, ["--scene", "forest", "--trees", "3", "--size", "320x240",
+                                    "--resolution", "8", "-k", "4"])  # fmt: skip
+    try:
+        what = rf"{forest.n_instances} instances of {len(forest.assets)} assets"
+        s.settle(rf"showing mesh \({what}, {forest.n_faces:,} triangles in all\) at 320x240", after=0)
+        with_overlay = s.screenshot()
+        s.press("o", r"overlay off$")
+        camera = Orbit(forest.bounds, aspect=size[0] / size[1]).camera()
+        try:
+            renderer = Renderer(size)
+        except ResourceError:
+            renderer = None
+        images = {}
+        for key, method in (("1", "mesh"), ("2", "volume"), ("3", "splat")):
+            if method != "mesh":
+                m = s.press(key, rf"(showing|unavailable|failed) {method}")
+                if m.group(1) != "showing":
+                    pytest.fail(f"the {method} renderer did not draw the scene; log:\n{s.log()}")
+                assert re.search(rf"^aniso3d view: showing {method} \({what}, [\d,]+ voxels at the finest\) "
+                                 r"at 320x240, .*voxels 8³ K=4 per asset$", s.log(), re.M)  # fmt: skip
+            img = images[method] = s.screenshot()
+            assert drawn(img) > 0.05 * size[0] * size[1], f"the {method} renderer drew too little"
+            if renderer is not None:
+                options = {"splat": "disc", "quality": "fast"} if method == "splat" else {}
+                expected = renderer.render(forest, camera, method, resolution=8, directions=4, **options)
+                assert mean_diff(img, expected) < 0.5, f"the viewer's {method} is not the scene's picture"
+        if renderer is not None:
+            renderer.release()
+        assert mean_diff(images["mesh"], images["volume"]) > 0.5 and mean_diff(images["volume"], images["splat"]) > 0.5
+        assert mean_diff(with_overlay[:80, :200], images["mesh"][:80, :200]) > 5, "no overlay drawn"
+        assert s.close("q") == 0, s.log()
+    finally:
+        s.kill()

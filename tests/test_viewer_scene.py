@@ -154,3 +154,44 @@ def test_auto_resolution_is_what_the_start_view_needs_and_steps_from_there():
     assert tstate.resolve_resolution((96, 72)) is None and tstate.settings.resolution == 8
     pstate = ViewState.for_input(tex.to_points(), Settings(resolution="auto"))
     assert pstate.resolve_resolution((96, 72)) is None and isinstance(pstate.settings.resolution, int)
+
+
+@pytest.mark.gpu
+def test_a_scene_is_drawn_by_the_renderers_scene_path_in_every_method(renderer, monkeypatch):
+    """A forest in the viewer's scene: its conversions made by the background
+    builds, then each method's frame drawn by the renderer's own scene path
+    is the headless renderer's picture of the scene from the same camera,
+    and its DrawStats count every instance (all in view)."""
+    import aniso3d.rendering.renderer as front
+    from aniso3d.app.viewer.data import cache_entries
+
+    forest = scenes.forest(3, species=2)
+    r = Renderer(SIZE, cache_entries=cache_entries(forest), cache_bytes=None, gl=renderer.gl)
+    log: list[str] = []
+    state = ViewState.for_input(forest, Settings(resolution=8, directions=4), aspect=SIZE[0] / SIZE[1])
+    data = Conversions(forest, "scene", r.conversions)
+    scene = SceneView(r.gl, r, data, state.orbit.bounds, log.append)
+    camera = state.orbit.camera()
+    try:
+        for method in ("mesh", "volume", "splat"):
+            state.press(method)
+            with monkeypatch.context() as m:  # the window's thread only uploads: no conversion there
+                for name in ("build_texture", "pyramid"):
+                    m.setattr(front, name, lambda *a, name=name, **k: pytest.fail(f"{name} on the main thread"))
+                _ready(scene, state)
+            stats = scene.frame.stats
+            assert stats.lod["instances"] == stats.lod["visible"] == forest.n_instances == 4
+            if method == "mesh":
+                assert stats == DrawStats(forest.n_faces, "triangles", (), stats.lod)
+            else:
+                assert stats.drawn > 0 and sum(stats.lod["instances_per_level"]) == 4
+            img = np.frombuffer(scene.fbo.read(components=3), np.uint8).reshape(SIZE[1], SIZE[0], 3)[::-1]
+            options = {"splat": "disc", "quality": "fast"} if method == "splat" else {}
+            expected = r.render(forest, camera, method, resolution=8, directions=4, **options)
+            assert np.count_nonzero(img.min(axis=2) < 240) > 200, f"the {method} drew next to nothing"
+            assert np.abs(img.astype(np.int16) - expected).mean() < 0.5, f"the viewer's {method} is not the scene's"
+        assert sum(line.startswith("uploaded the ") for line in log) == 3
+        assert any(line.startswith("showing splat (4 instances of 3 assets") for line in log)
+    finally:
+        scene.release()
+        r.release()

@@ -374,3 +374,133 @@ def test_overlay_text_layout():
     assert texts[4] == "frame – · 320x240"
     assert texts[5] == "drawing 12 voxels of 2x2x3 (previous settings)"
     assert lines[-2] == ("building pyramid… 50% 0.1 s", YELLOW) and lines[-1] == ("overlay off", YELLOW)
+
+
+# ----------------------------------------------------------------- scenes
+
+
+@pytest.fixture(scope="module")
+def forest():
+    """Three trees of two kinds and the ground: 4 instances of 3 assets."""
+    sc = scenes.forest(3, species=2)
+    assert sc.n_instances == 4 and len(sc.assets) == 3
+    return sc
+
+
+def test_scene_state_steps_voxels_and_keeps_level_of_detail_on(forest):
+    state = ViewState.for_input(forest, Settings(resolution="auto"))
+    assert state.kind == "scene" and state.settings.method == "mesh" and state.lod
+    assert "per asset" in state.resolve_resolution((320, 240)) and state.settings.resolution == 64
+    assert state.press("voxels up").changed == ("resolution",) and state.settings.resolution == 96
+    reply = state.press("level of detail")
+    assert reply.notice and "always on" in reply.text and reply.changed == ()
+    assert state.press("placement").changed == ("placement",)
+    s = Settings(method="volume", resolution=8, directions=4, lod=True)
+    assert settings_text(s, "scene") == "quality fast, voxels 8³ K=4 per asset"
+
+
+def test_scene_data_is_prepared_in_the_background_where_the_renderer_looks(forest):
+    """The scene's keys per method, and their builds: each asset's texture
+    under the renderer's own cache keys, equal to one built here, its
+    pyramid, and (splats) every level's points in that pyramid."""
+    state = ViewState.for_input(forest, Settings(resolution=8, directions=4))
+    conv = Conversions(forest, "scene")
+    pkey, skey = ("scene pyramids", 8, 4), ("scene points", 8, 4, "centroid")
+    assert [conv.requirement(state, m)[0] for m in ("mesh", "volume", "splat")] == [("scene",), pkey, skey]
+    assert conv.lookup(("scene",)) is forest and conv.lookup(pkey) is None and conv.lookup(skey) is None
+    state.press("splat")
+    assert conv.wanted(state) == [skey, pkey]
+    state.press("volume")
+    assert conv.wanted(state) == [pkey, skey]
+
+    assert conv.schedule(state) == describe_key(pkey) == "scene's asset pyramids 8³ (K=4)"
+    assert conv.builder.wait(120)
+    done = conv.collect()
+    assert not done.error and done.text.endswith(f"{forest.n_instances} instances of 3 assets, "
+                                                 f"{sum(build_texture(a, 8, 4).n_voxels for a in forest.assets):,} "
+                                                 "voxels at the finest")  # fmt: skip
+    prep = conv.lookup(pkey)
+    assert prep is not None and conv.lookup(skey) is None, "the points are not made yet"
+    for asset, tex, pyr in zip(forest.assets, prep.textures, prep.pyramids, strict=True):
+        assert conv.cache.get(asset, ("texture", 8, 4)) is tex and conv.cache.get(tex, ("pyramid",)) is pyr
+        ref = build_texture(asset, 8, 4)
+        assert np.array_equal(tex.coords, ref.coords) and np.allclose(tex.density, ref.density)
+        assert pyr[0] is tex and len(pyr) >= 2
+
+    # The splats' build reuses the pyramids and fills in their level points.
+    assert conv.schedule(state) == "scene's asset points (centroid) 8³ (K=4)"
+    assert conv.builder.wait(120)
+    assert not conv.collect().error
+    points = conv.lookup(skey)
+    assert points is not None and points.placement == "centroid"
+    assert all(a is b for a, b in zip(points.pyramids, prep.pyramids, strict=True))
+    for pyr in points.pyramids:
+        cloud, _ = pyr.level_cloud(0, "centroid")
+        ref = pyr[0].to_points("centroid")
+        assert len(cloud) == len(ref) and np.allclose(cloud.positions, ref.positions)
+    assert conv.schedule(state) is None, "nothing left to build"
+
+    # Another placement: its points are wanted; the pyramids stay as they are.
+    state.press("placement")
+    other = ("scene points", 8, 4, state.settings.placement)
+    assert conv.lookup(other) is None and conv.lookup(pkey).pyramids == prep.pyramids
+    # A pyramid rebuilt (evicted, say) has no points: the record no longer counts.
+    conv.cache.discard(prep.textures[0])
+    assert conv.lookup(pkey) is None and conv.lookup(skey) is None
+
+
+def test_scene_status_shows_the_instances_and_what_was_drawn(forest):
+    state = ViewState.for_input(forest, Settings(method="splat", resolution=8, directions=4))
+    lod = {"instances": 4, "visible": 3, "culled": 1, "instance_levels": [], "instances_per_level": [2, 1],
+           "points": 1234, "selection_ms": 0.25}  # fmt: skip
+    from aniso3d.rendering.frame import DrawStats
+
+    shown = Shown(("scene points", 8, 4, "centroid"), None, None, "4 instances of 3 assets, 316 voxels at the finest")
+    frame = Frame("ready", shown=shown, stats=DrawStats(1234, "points", (0, 1), lod))
+    lines = [t for t, _ in status_lines("forest3", state, frame, "", (320, 240), None, None)]
+    assert "voxels 8³ K=4 per asset" in lines
+    assert "drawing 4 instances of 3 assets, 316 voxels at the finest" in lines
+    assert "this frame 1,234 points from levels 0 1" in lines
+    assert any(t.startswith("3 of 4 instances (1 culled) · instances per level 0:2 1:1 · 1,234 points") for t in lines)
+    # Polygons draw no levels: the instances are still reported.
+    mesh = Frame("ready", shown=shown, stats=DrawStats(500, "triangles", (), dict(lod, instances_per_level=[3])))
+    lines = [t for t, _ in status_lines("forest3", state, mesh, "", (320, 240), None, None)]
+    assert "this frame 500 triangles" in lines and any(t.startswith("3 of 4 instances") for t in lines)
+
+
+def test_view_command_reads_scenes_and_refuses_bad_combinations(tmp_path, capsys):
+    import trimesh
+
+    from aniso3d.app.cli import build_parser, main
+    from aniso3d.app.view_cmd import read_view_input
+    from aniso3d.build.mesh import Mesh
+    from aniso3d.build.scene import Scene
+
+    box = trimesh.creation.box()
+    two, one = trimesh.Scene(), trimesh.Scene()
+    for x in (-2.0, 2.0):
+        two.add_geometry(box, geom_name="box", node_name=f"box{x}",
+                         transform=trimesh.transformations.translation_matrix([x, 0.0, 0.0]))  # fmt: skip
+    one.add_geometry(box, geom_name="box")
+    two.export(tmp_path / "two.glb")
+    one.export(tmp_path / "one.glb")
+    parse = build_parser().parse_args
+    sc = read_view_input(parse(["view", str(tmp_path / "two.glb")]))
+    assert isinstance(sc, Scene) and sc.n_instances == 2
+    np.testing.assert_allclose(sc.bounds, [[-2.5, -0.5, -0.5], [2.5, 0.5, 0.5]], atol=1e-6)
+    assert isinstance(read_view_input(parse(["view", str(tmp_path / "one.glb")])), Mesh), "one placed mesh: a mesh"
+    forest = read_view_input(parse(["view", "--scene", "forest", "--trees", "5"]))
+    assert isinstance(forest, Scene) and forest.n_instances == 6  # the trees and the ground
+
+    for argv, words in (
+        (["view", "scene:cube", "--scene", "forest"], "not both"),
+        (["view", "--trees", "5"], "--trees applies to --scene forest"),
+        (["view", str(tmp_path / "two.glb"), "--trees", "5"], "--trees applies to --scene forest"),
+        (["view", "--scene", str(tmp_path / "two.glb"), "--trees", "5"], "not to --scene"),
+        (["view", "--scene", "forest", "--splat-size", "0.1"], "--splat-size for PLY point clouds only"),
+        (["view", "--scene", "meadow"], "--scene takes 'forest' or a glTF file"),
+    ):
+        code = main(argv)
+        err = capsys.readouterr().err
+        assert code == 2 and words in err and "Traceback" not in err, (argv, err)
+        assert len(err.strip().splitlines()) == 1, err

@@ -83,7 +83,7 @@ def status_lines(name: str, state: ViewState, frame: Frame, timing: str, size: t
         for i, m in enumerate(METHODS, 1)
     )
     lines.append((f"renderer  {names}", WHITE))
-    vox = f"{s.resolution}³ K={s.directions}" + ("" if kind == "mesh" else " (fixed)")
+    vox = f"{s.resolution}³ K={s.directions}" + {"mesh": "", "scene": " per asset"}.get(kind, " (fixed)")
     if kind == "points":
         vox = "n/a (point cloud)"
     lines.append((f"splat {s.splat} · quality {s.quality} · placement {s.placement}", GREY))
@@ -101,13 +101,18 @@ def status_lines(name: str, state: ViewState, frame: Frame, timing: str, size: t
 
 
 def stats_lines(stats: DrawStats | None) -> list[str]:
-    """What the last draw says it drew, where it drew from a pyramid: the
-    primitives and levels of the frame, and the selection
-    (:func:`~aniso3d.rendering.select.describe_stats`); nothing otherwise."""
-    if stats is None or not stats.levels:
+    """What the last draw says it drew, where it drew from a pyramid or drew
+    a scene's instances: the primitives and levels of the frame, and the
+    selection (:func:`~aniso3d.rendering.select.describe_stats`: for a scene,
+    the instances drawn, culled and per level); nothing otherwise."""
+    scene = stats is not None and bool(stats.lod) and "instances" in stats.lod
+    if stats is None or not (stats.levels or scene):
         return []
     levels = " ".join(str(level) for level in stats.levels)
-    lines = [f"this frame {stats.drawn:,} {stats.unit} from level{'s' if len(stats.levels) > 1 else ''} {levels}"]
+    line = f"this frame {stats.drawn:,} {stats.unit}"
+    if stats.levels:
+        line += f" from level{'s' if len(stats.levels) > 1 else ''} {levels}"
+    lines = [line]
     lod = describe_stats(stats.lod)
     return lines + ([lod] if lod else [])
 

@@ -12,6 +12,13 @@ the fields it declares, and its :class:`~aniso3d.rendering.frame.DrawStats`
 go to the overlay. A renderer that fails to start, to take its data, or to
 draw is reported in the frame (and its traceback on stderr) instead of taking
 the window down.
+
+A :class:`~aniso3d.build.scene.Scene` of instances is drawn by the
+renderer's own scene path (:func:`~aniso3d.rendering.scene_draw.upload_scene`
+each frame, as :meth:`Renderer.render <aniso3d.rendering.renderer.Renderer.render>`
+does: cache hits once its assets are uploaded, then
+:func:`~aniso3d.rendering.scene_draw.draw_scene`), its conversions made
+beforehand in the background (:mod:`aniso3d.app.viewer.data`).
 """
 
 from __future__ import annotations
@@ -29,7 +36,8 @@ from aniso3d.app.viewer.state import METHOD_LABELS, Settings, ViewState, setting
 from aniso3d.rendering.base import DrawOptions, MethodRenderer
 from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.frame import DrawStats, FrameView
-from aniso3d.rendering.renderer import Renderer
+from aniso3d.rendering.renderer import BuildOptions, Renderer
+from aniso3d.rendering.scene_draw import SceneUpload, draw_scene, upload_scene
 
 
 @dataclass
@@ -79,6 +87,7 @@ class SceneView:
         self._start_errors: dict[str, str] = {}  # method -> why its renderer did not start
         self._upload_errors: dict[tuple, str] = {}  # (method, data key) -> why the upload failed
         self._draw_error: str | None = None
+        self._scene_uploaded: set[tuple] = set()  # (method, data key) of a scene, logged once
         self.frame = Frame("building")
         #: Smoothed draw time of the scene, ms; None until the first frame of a regime.
         self.frame_ms: float | None = None
@@ -141,7 +150,10 @@ class SceneView:
     def handle(self, method: str, impl: MethodRenderer, data, key: tuple):
         """The GPU handle of ``data`` for ``method``: from the renderer's upload
         cache, or uploaded now (and logged) if it is not there (first use, or
-        evicted since)."""
+        evicted since). For a scene: its :class:`SceneUpload`, from the
+        renderer's scene path."""
+        if self.data.kind == "scene":
+            return self._scene_handle(method, key)
         uploads = self.renderer.uploads
         ukey = ("viewer upload", method)
         handle = uploads.get(data, ukey)
@@ -152,6 +164,22 @@ class SceneView:
                 f"uploaded {describe_key(key)} for {METHOD_LABELS[method]} in {time.perf_counter() - t0:.2f} s"
             )
         return handle
+
+    def _scene_handle(self, method: str, key: tuple) -> SceneUpload:
+        """The scene's upload for ``method`` and data ``key``: every asset
+        uploaded through the renderer's caches (its conversions are there
+        already: the data key is ready); the first upload of a key is logged."""
+        build = BuildOptions()
+        if key[0] != "scene":
+            build = BuildOptions(resolution=key[1], directions=key[2],
+                                 placement=key[3] if key[0] == "scene points" else "centroid")  # fmt: skip
+        t0 = time.perf_counter()
+        up = upload_scene(self.renderer, self.data.thing, method, build)
+        if (method, key) not in self._scene_uploaded:
+            self._scene_uploaded.add((method, key))
+            what = "scene's assets" if key[0] == "scene" else describe_key(key)
+            self._say(f"uploaded the {what} for {METHOD_LABELS[method]} in {time.perf_counter() - t0:.2f} s")
+        return up
 
     def _releaser(self, impl: MethodRenderer):
         def release(handle) -> None:
@@ -204,7 +232,10 @@ class SceneView:
                 view = FrameView(camera, self.renderer.lighting, fsize, near, far, ssaa)
                 fbo.use()
                 t0 = time.perf_counter()
-                frame.stats = shown.impl.draw(handle, view, fbo=fbo, options=options)
+                if isinstance(handle, SceneUpload):  # the renderer's scene path
+                    frame.stats = draw_scene(shown.impl, handle, view, fbo, options)
+                else:
+                    frame.stats = shown.impl.draw(handle, view, fbo=fbo, options=options)
                 self.gl.ctx.finish()  # time the whole frame, not just queueing its commands
                 ms = 1000.0 * (time.perf_counter() - t0)
                 self.frame_ms = ms if self.frame_ms is None else 0.7 * self.frame_ms + 0.3 * ms

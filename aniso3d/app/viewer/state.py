@@ -17,6 +17,7 @@ import numpy as np
 from aniso3d.build.bounds import bounds_of
 from aniso3d.build.mesh import Mesh
 from aniso3d.build.points import PointCloud
+from aniso3d.build.scene import Scene
 from aniso3d.build.texture import DEFAULT_DIRECTIONS, PLACEMENTS, AnisoTexture
 from aniso3d.errors import InputError
 from aniso3d.rendering.camera import Camera
@@ -101,12 +102,19 @@ def cycle(options: tuple, current):
     return options[(options.index(current) + 1) % len(options)] if current in options else options[0]
 
 
+#: What the viewer takes: input class -> kind.
+KINDS = ((Mesh, "mesh"), (AnisoTexture, "texture"), (PointCloud, "points"), (Scene, "scene"))
+
+
 def input_kind(thing) -> str:
-    """"mesh", "texture" or "points": what the viewer was given."""
-    for cls, kind in ((Mesh, "mesh"), (AnisoTexture, "texture"), (PointCloud, "points")):
+    """"mesh", "texture", "points" or "scene" (a :class:`~aniso3d.build.scene.Scene`
+    of instances): what the viewer was given."""
+    for cls, kind in KINDS:
         if isinstance(thing, cls):
             return kind
-    raise InputError(f"cannot view a {type(thing).__name__}; give a mesh, a .a3d texture or a PLY point cloud")
+    raise InputError(
+        f"cannot view a {type(thing).__name__}; give a mesh, a .a3d texture, a PLY point cloud or a scene"
+    )
 
 
 def orbit_direction(azimuth: float, elevation: float) -> np.ndarray:
@@ -203,8 +211,8 @@ def settings_text(s: Settings, kind: str) -> str:
         if kind != "points":
             parts.append(f"placement {s.placement}")
     if s.method != "mesh" and kind != "points":
-        parts.append(f"voxels {s.resolution}³ K={s.directions}")
-        if s.lod:
+        parts.append(f"voxels {s.resolution}³ K={s.directions}" + (" per asset" if kind == "scene" else ""))
+        if s.lod and kind != "scene":  # a scene's instances always choose their level
             parts.append("level of detail")
     return ", ".join(parts)
 
@@ -225,20 +233,22 @@ class Reply:
 
 class ViewState:
     """The settings and the camera for one input of ``kind`` ("mesh",
-    "texture" or "points") whose drawn content spans ``bounds`` (2, 3)."""
+    "texture", "points" or "scene") whose drawn content spans ``bounds`` (2, 3).
+    A scene is converted per asset, as a mesh is (its resolution steps), and
+    its instances always draw from their assets' pyramids."""
 
     def __init__(self, kind: str, bounds: np.ndarray, settings: Settings | None = None, aspect: float = 1.0):
-        if kind not in ("mesh", "texture", "points"):
-            raise InputError(f"unknown input kind '{kind}'; one of mesh, texture, points")
+        if kind not in ("mesh", "texture", "points", "scene"):
+            raise InputError(f"unknown input kind '{kind}'; one of mesh, texture, points, scene")
         self.kind = kind
         self.settings = replace(settings) if settings is not None else Settings()
         if self.settings.method is None:
-            self.settings.method = {"mesh": "mesh", "texture": "volume", "points": "splat"}[kind]
+            self.settings.method = {"mesh": "mesh", "texture": "volume", "points": "splat", "scene": "mesh"}[kind]
         self.orbit = Orbit(bounds, aspect=aspect)
 
     @classmethod
     def for_input(cls, thing, settings: Settings | None = None, aspect: float = 1.0) -> ViewState:
-        """The state for a Mesh, AnisoTexture or PointCloud; a texture fixes the
+        """The state for a Mesh, AnisoTexture, PointCloud or Scene; a texture fixes the
         resolution and directions to its own."""
         state = cls(input_kind(thing), bounds_of(thing), settings, aspect)
         if state.kind == "texture":
@@ -253,6 +263,9 @@ class ViewState:
         to log, or None when the resolution was a number already."""
         if self.settings.resolution != AUTO:
             return None
+        if self.kind == "scene":  # assets of many sizes seen from many distances: one default for all
+            self.settings.resolution = DEFAULT_RESOLUTION
+            return f"voxels {DEFAULT_RESOLUTION}³ per asset (auto: a scene's default; [ and ] step it)"
         if self.kind != "mesh":  # nothing is converted: a texture keeps its own, points have none
             self.settings.resolution = DEFAULT_RESOLUTION
             return None
@@ -262,8 +275,9 @@ class ViewState:
 
     @property
     def lod(self) -> bool:
-        """Whether the volume and splats draw from the pyramid (never for a point cloud)."""
-        return self.settings.lod and self.kind != "points"
+        """Whether the volume and splats draw from the pyramid (never for a
+        point cloud; always for a scene, whose instances each choose a level)."""
+        return self.kind == "scene" or (self.settings.lod and self.kind != "points")
 
     def press(self, action: str, aspect: float | None = None) -> Reply:
         """Apply one of :data:`ACTIONS`; ``aspect`` (width / height) is the
@@ -288,6 +302,9 @@ class ViewState:
         if action == "level of detail":
             if self.kind == "points":
                 return Reply("level of detail needs a texture: the input is a point cloud", notice=True)
+            if self.kind == "scene":
+                return Reply("level of detail is always on for a scene: each instance draws its own level",
+                             notice=True)  # fmt: skip
             state = "off" if s.lod else "on"
             if s.method == "mesh":
                 return self._set("lod", not s.lod, f"level of detail {state}: it applies to the volume and splats",
@@ -309,7 +326,7 @@ class ViewState:
         return Reply(text if text is not None else f"{name} {value}", notice=notice, changed=(name,))
 
     def _step_resolution(self, step: int) -> Reply:
-        if self.kind != "mesh":
+        if self.kind not in ("mesh", "scene"):
             what = "saved texture" if self.kind == "texture" else "point cloud"
             return Reply(f"resolution is fixed: the input is a {what}", notice=True)
         new = step_resolution(self.settings.resolution, step)

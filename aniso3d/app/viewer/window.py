@@ -29,7 +29,7 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
-from aniso3d.app.viewer.data import CACHE_BYTES, CACHE_ENTRIES, Conversions
+from aniso3d.app.viewer.data import CACHE_BYTES, Conversions, cache_entries
 from aniso3d.app.viewer.overlay import GREEN, MARGIN, RED, WHITE, YELLOW, Overlay, key_lines, status_lines, wrap
 from aniso3d.app.viewer.scene import SceneView
 from aniso3d.app.viewer.state import KEYS, Settings, ViewState
@@ -106,8 +106,8 @@ def open_window(size: tuple[int, int], caption: str):
 
 
 class Viewer:
-    """The window app. ``thing`` is a :class:`Mesh`, :class:`AnisoTexture` or
-    :class:`PointCloud`; ``name`` labels it. Call :meth:`run`; it returns the
+    """The window app. ``thing`` is a :class:`Mesh`, :class:`AnisoTexture`,
+    :class:`PointCloud` or :class:`~aniso3d.build.scene.Scene`; ``name`` labels it. Call :meth:`run`; it returns the
     exit status (0 when closed by a key or the window's close button)."""
 
     def __init__(
@@ -130,7 +130,7 @@ class Viewer:
             self.gl = GLContext.wrap(self.ctx)
             # One conversion cache and one upload cache, the renderer's, for the whole viewer.
             self.renderer = Renderer(self.window.get_framebuffer_size(), gl=self.gl,
-                                     cache_entries=CACHE_ENTRIES, cache_bytes=CACHE_BYTES)  # fmt: skip
+                                     cache_entries=cache_entries(thing), cache_bytes=CACHE_BYTES)  # fmt: skip
             self.data = Conversions(thing, self.state.kind, self.renderer.conversions)
             w, h = self.window.get_framebuffer_size()
             self.state.orbit.reset(w / max(h, 1))
