@@ -272,6 +272,11 @@ def frame_client(client=None, workers: int | None = None, scheduler: str | None 
         yield c
 
 
+#: Times :func:`run_batches` scatters its input again after the cluster lost
+#: it with a worker, before giving up.
+MAX_SCATTERS = 4
+
+
 def run_batches(
     client,
     thing,
@@ -300,18 +305,36 @@ def run_batches(
     if folder is not None:
         job = FrameJob(**{**job.__dict__, "png": True})
         folder = Path(folder)
-    [data] = client.scatter([thing], broadcast=True, hash=False)
     token = uuid.uuid4().hex[:8]
-    pending = {
-        client.submit(render_batch, data, cams[a:b], a, job, key=f"aniso3d-frames-{token}-{a:06d}",
-                      retries=retries, pure=False): (a, b)
-        for a, b in ranges
-    }  # fmt: skip
+    data = client.scatter([thing], broadcast=True, hash=False)[0]
+    scatters = 1
+
+    def submit(a: int, b: int, attempt: int):
+        return client.submit(render_batch, data, cams[a:b], a, job, key=f"aniso3d-frames-{token}-{a:06d}-{attempt}",
+                             retries=retries, pure=False)  # fmt: skip
+
+    pending = {submit(a, b, 0): (a, b, 0, data.key) for a, b in ranges}
     out: list = [None] * n
     done = 0
     try:
-        for f in as_completed(list(pending)):
-            a, b = pending.pop(f)
+        queue = as_completed(list(pending))
+        for f in queue:
+            a, b, attempt, used = pending.pop(f)
+            if f.cancelled():
+                # Dask forgets scattered data when a worker holding it dies,
+                # even when broadcast (dask/distributed#3149), and cancels the
+                # batches that need it: scatter the thing again, redo them.
+                if used == data.key:
+                    if scatters > MAX_SCATTERS:
+                        raise ResourceError(f"the cluster lost the scattered input {scatters} times (workers "
+                                            "dying?); check the workers' logs and memory")  # fmt: skip
+                    data.release()
+                    data = client.scatter([thing], broadcast=True, hash=False)[0]
+                    scatters += 1
+                again = submit(a, b, attempt + 1)
+                pending[again] = (a, b, attempt + 1, data.key)
+                queue.add(again)
+                continue
             frames = f.result()
             f.release()
             for i, frame in enumerate(frames, a):
