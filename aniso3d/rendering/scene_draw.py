@@ -335,7 +335,7 @@ VOLUME_INSTANCED = True
 #: equal counts, and each slab draws its (asset, level) groups farthest
 #: first: calls at most slabs x groups, and instances of different groups
 #: composed out of order only inside a slab (read at each frame).
-VOLUME_DEPTH_SLABS = 4
+VOLUME_DEPTH_SLABS = 16
 
 
 def _draw_volume(impl, up: SceneUpload, view: FrameView, fbo, opts) -> DrawStats:
