@@ -10,7 +10,10 @@ The arrays live in 2D textures (texelFetch; llvmpipe reads a storage buffer
 lane by lane), and each ray first finds its next occupied voxel, then
 composites it, so that a SIMD batch of pixels composites together
 (``march="skip"``); ``march="plain"`` keeps the first version for comparison
-(docs/volume_speed.md).
+(docs/volume_speed.md). A scene's instances of one grid are marched in one
+instanced draw call (:meth:`VolumeRenderer.draw_instanced`, ``INSTANCED`` in
+volume.vert/.frag): each instance's screen box, with the camera moved into
+its frame (:func:`instance_rays`).
 
 A voxel seen along the unit ray direction w (METHOD.md "Reference
 conventions"), with ``P(w) = |wx| + |wy| + |wz|`` and h the voxel edge:
