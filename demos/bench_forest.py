@@ -5,10 +5,13 @@ Each forest (``aniso3d.scenes.forest(n)``, ground side 8 sqrt(n) m) is seen
 from the same direction by a camera framing it, so every forest covers about
 the same screen area: many small far trees against a few large near ones.
 Methods are interleaved per repetition; the median and the spread (min-max)
-of the frames are reported with the load average. Writes docs/forest.md and
-docs/forest.png.
+of the frames are reported with the load average. "volume" draws the
+instances by instanced calls per (asset, level) group and depth slab,
+"volume passes" one ray-marching pass per instance as first written
+(``aniso3d.rendering.scene_draw.VOLUME_INSTANCED``; ``--no-passes`` leaves it
+out). Writes docs/forest.md and docs/forest.png.
 
-    ./.venv/bin/python demos/bench_forest.py [--size 512] [--reps 3]
+    ./.venv/bin/python demos/bench_forest.py [--size 512] [--reps 3] [--counts 100 10000]
 """
 
 from __future__ import annotations
@@ -33,9 +36,20 @@ POLYGON_MAX = 1000
 ERROR_MAX = 100
 
 
+def draw(r: Renderer, scene, cam, method: str, **opts):
+    """``r.render`` of ``method``, "volume passes" being the volume without instancing."""
+    from aniso3d.rendering import scene_draw
+
+    scene_draw.VOLUME_INSTANCED = method != "volume passes"
+    try:
+        return r.render(scene, cam, method.split()[0], **opts)
+    finally:
+        scene_draw.VOLUME_INSTANCED = True
+
+
 def frame(r: Renderer, scene, cam, method: str) -> tuple[float, dict]:
     opts = {} if method == "mesh" else {"resolution": RESOLUTION}
-    r.render(scene, cam, method, **opts)
+    draw(r, scene, cam, method, **opts)
     return r.last_frame_seconds, dict(r.last_lod_stats or {})
 
 
@@ -45,15 +59,18 @@ def main() -> None:
     ap.add_argument("--reps", type=int, default=3)
     ap.add_argument("--error-size", type=int, default=256)
     ap.add_argument("--out", default="docs")
+    ap.add_argument("--counts", type=int, nargs="+", default=list(COUNTS))
+    ap.add_argument("--no-passes", action="store_true", help="leave out the volume drawn one pass per instance")
     args = ap.parse_args()
     size = (args.size, args.size)
     rows = []
     load = [os.getloadavg()[0]]
     with Renderer(size, cache_entries=64) as r:
-        for n in COUNTS:
+        for n in args.counts:
             scene = aniso3d.scenes.forest(n, seed=1)
             cam = aniso3d.framing_camera(scene, size, direction=VIEW)
-            methods = ["splat", "volume"] + (["mesh"] if n <= POLYGON_MAX else [])
+            passes = [] if args.no_passes else ["volume passes"]
+            methods = ["splat", "volume", *passes] + (["mesh"] if n <= POLYGON_MAX else [])
             for m in methods:  # warm-up: conversions, uploads, programs
                 frame(r, scene, cam, m)
             times = {m: [] for m in methods}
@@ -71,17 +88,19 @@ def main() -> None:
                     "n": n, "method": m, "median_ms": float(np.median(t)), "min_ms": float(t.min()),
                     "max_ms": float(t.max()), "visible": st.get("visible"), "points": st.get("points"),
                     "levels": st.get("instances_per_level"), "selection_ms": st.get("selection_ms"),
+                    "calls": st.get("draw_calls"),
                 })  # fmt: skip
                 print(rows[-1], flush=True)
         errors = []
         esize = (args.error_size, args.error_size)
-        for n in [c for c in COUNTS if c <= ERROR_MAX]:
+        for n in [c for c in args.counts if c <= ERROR_MAX]:
             scene = aniso3d.scenes.forest(n, seed=1)
             cam = aniso3d.framing_camera(scene, esize, direction=VIEW)
             truth = r.render(scene, cam, "mesh", ssaa=8, size=esize)
-            for m, q in (("splat", "fast"), ("splat", "high"), ("volume", None)):
+            vols = [("volume", None)] + ([] if args.no_passes else [("volume passes", None)])
+            for m, q in (("splat", "fast"), ("splat", "high"), *vols):
                 opts = {"quality": q} if q else {}
-                img = r.render(scene, cam, m, size=esize, resolution=RESOLUTION, **opts)
+                img = draw(r, scene, cam, m, size=esize, resolution=RESOLUTION, **opts)
                 e = compare(truth, img)
                 name = f"{m} {q}" if q else m
                 errors.append({"n": n, "method": name, **{k: float(v) for k, v in e.items() if np.isfinite(v)}})
@@ -100,7 +119,7 @@ def write(rows, errors, load, args, out: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6, 4))
-    for m in ("mesh", "splat", "volume"):
+    for m in ("mesh", "splat", "volume", "volume passes"):
         pts = [(r["n"], r["median_ms"], r["min_ms"], r["max_ms"]) for r in rows if r["method"] == m]
         if pts:
             n, med, lo, hi = map(np.array, zip(*pts, strict=True))
@@ -130,16 +149,17 @@ def write(rows, errors, load, args, out: Path) -> None:
         "each instance's level also limited to one point per pixel of its projected bounding sphere "
         "(`aniso3d.rendering.instances.POINTS_PER_PIXEL`).",
         "",
-        "| trees | method | frame ms | visible | points drawn | instances per level (0 = finest) |",
-        "| ---: | --- | ---: | ---: | ---: | --- |",
+        "| trees | method | frame ms | visible | points drawn | draw calls | instances per level (0 = finest) |",
+        "| ---: | --- | ---: | ---: | ---: | ---: | --- |",
     ]
     for r in rows:
         lines.append(
             f"| {r['n']} | {r['method']} | {r['median_ms']:.0f} ({r['min_ms']:.0f}-{r['max_ms']:.0f}) | "
-            f"{r['visible']} | {r['points'] if r['points'] is not None else '-'} | {r['levels']} |"
+            f"{r['visible']} | {r['points'] if r['points'] is not None else '-'} | "
+            f"{r['calls'] if r['calls'] is not None else '-'} | {r['levels']} |"
         )
     lines += ["", "Target: 10,000 trees at most 3x the time of 100 trees on the same screen area.", ""]
-    for m in ("splat", "volume"):
+    for m in ("splat", "volume", "volume passes"):
         a, b = t.get((100, m)), t.get((10000, m))
         if a and b:
             lines.append(f"- {m}: 100 trees {a['median_ms']:.0f} ms, 10,000 trees {b['median_ms']:.0f} ms: "

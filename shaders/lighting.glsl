@@ -22,6 +22,11 @@
 // At c = 1 both reduce exactly to the plain closed form.
 
 #define MAX_LIGHTS 4
+// The light directions shade() reads (a shader may name its own array, e.g.
+// the lights turned into an instance's frame: volume.frag INSTANCED).
+#ifndef LIGHT_DIR
+#define LIGHT_DIR u_light_dir
+#endif
 
 uniform vec3 u_ambient;
 uniform int u_num_lights;
@@ -47,7 +52,7 @@ vec3 shade(vec3 n, vec3 v, vec3 kd, float ks, float shininess, float coherence) 
     vec3 color = u_ambient * kd;
     for (int i = 0; i < MAX_LIGHTS; ++i) {
         if (i >= u_num_lights) break;
-        vec3 l = u_light_dir[i];
+        vec3 l = LIGHT_DIR[i];
         float ndl = dot(n, l);
         float diffuse = max(ndl, 0.0);
         if (spread > 0.0) {

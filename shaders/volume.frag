@@ -37,6 +37,17 @@
 // Out: f_color = (C + T * background, 1 - T), C the premultiplied colour and
 // T the transmittance left; gl_FragDepth where 1 - T first reaches 0.5 (1.0
 // if it never does). Rays that miss the grid are discarded.
+// INSTANCED (volume.vert): the camera basis and the ray base come per
+// instance as flat inputs v_forward, v_right, v_up, v_base_c and v_planes =
+// (u_base_s, u_near_b, u_far_b), in the instance's grid frame; the uniforms
+// u_forward/u_right/u_up stay the world camera basis, and the lights
+// (u_light_dir, world) are turned into the instance's frame per fragment
+// (the rotation taking the world basis to the instance's: L W^T). The
+// depth is not meant to be kept (the scene draws without depth writes).
+#ifdef INSTANCED
+vec3 g_light_dir[4];
+#define LIGHT_DIR g_light_dir
+#endif
 #include "lighting.glsl"
 
 // Injected by render/volume.py: BRICK (brick edge in voxels), ALPHA_MAX
@@ -63,6 +74,28 @@ uniform int u_opacity_mode;
 uniform float u_pixel_angle;
 uniform vec2 u_sheet_pixels;
 uniform vec3 u_background;
+#ifdef INSTANCED
+flat in vec3 v_forward;
+flat in vec3 v_right;
+flat in vec3 v_up;
+flat in vec3 v_base_c;
+flat in vec3 v_planes;
+#define RAY_FORWARD v_forward
+#define RAY_RIGHT v_right
+#define RAY_UP v_up
+#define RAY_BASE_C v_base_c
+#define RAY_BASE_S v_planes.x
+#define RAY_NEAR_B v_planes.y
+#define RAY_FAR_B v_planes.z
+#else
+#define RAY_FORWARD u_forward
+#define RAY_RIGHT u_right
+#define RAY_UP u_up
+#define RAY_BASE_C u_base_c
+#define RAY_BASE_S u_base_s
+#define RAY_NEAR_B u_near_b
+#define RAY_FAR_B u_far_b
+#endif
 
 #ifdef PLAIN_MARCH
 layout(std430, binding = 0) readonly buffer TopIndex { int top[]; };
@@ -335,6 +368,13 @@ int min_axis(vec3 tm) {
 }
 
 void main() {
+#ifdef INSTANCED
+    {
+        // World to the instance's frame: its camera basis L times the world's W^T.
+        mat3 to_local = mat3(v_right, v_up, v_forward) * transpose(mat3(u_right, u_up, u_forward));
+        for (int i = 0; i < 4; ++i) g_light_dir[i] = to_local * u_light_dir[i];
+    }
+#endif
     vec2 ndc = gl_FragCoord.xy / u_size * 2.0 - 1.0;
     // The pixel's ray is eye + s * (forward + lat), s the distance along
     // forward. Its origin o is where it crosses the base's plane (s =
@@ -343,19 +383,19 @@ void main() {
     // Nothing here holds the eye's own (possibly huge) position, so float32
     // keeps a fraction of a voxel however far the eye is; the direction's
     // float32 error only acts over the ray's length inside the grid.
-    vec3 lat = ndc.x * u_tan.x * u_right + ndc.y * u_tan.y * u_up;
-    g_d = normalize(u_forward + lat);
+    vec3 lat = ndc.x * u_tan.x * RAY_RIGHT + ndc.y * u_tan.y * RAY_UP;
+    g_d = normalize(RAY_FORWARD + lat);
     // Axis components this small cross no cell boundary inside any grid.
     g_d = mix(g_d, vec3(0.0), lessThan(abs(g_d), vec3(1e-12)));
     g_p = abs(g_d.x) + abs(g_d.y) + abs(g_d.z);
-    vec3 o = u_center_g + u_base_c + u_base_s * lat;
-    g_dist0 = u_base_s * length(u_forward + lat);
+    vec3 o = u_center_g + RAY_BASE_C + RAY_BASE_S * lat;
+    g_dist0 = RAY_BASE_S * length(RAY_FORWARD + lat);
 
     // Ray parameter t (grid units from o) range: the grid's box, then
     // near/far. A point at t lies u_base_s + t * cos_f along forward.
-    float cos_f = dot(g_d, u_forward);
-    float t0 = u_near_b / cos_f;
-    float t1 = u_far_b / cos_f;
+    float cos_f = dot(g_d, RAY_FORWARD);
+    float t0 = RAY_NEAR_B / cos_f;
+    float t1 = RAY_FAR_B / cos_f;
     vec3 hi = vec3(u_shape);
     for (int a = 0; a < 3; ++a) {
         if (g_d[a] == 0.0) {
@@ -501,7 +541,7 @@ void main() {
     float depth = 1.0;
     if (g_has50) {
         float sb = g_t50 * cos_f;  // distance along forward beyond the base
-        depth = clamp(u_depth_k * (sb - u_near_b) / (u_base_s + sb), 0.0, 1.0);
+        depth = clamp(u_depth_k * (sb - RAY_NEAR_B) / (RAY_BASE_S + sb), 0.0, 1.0);
     }
     gl_FragDepth = depth;
 }

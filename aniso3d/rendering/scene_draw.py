@@ -14,8 +14,10 @@ volume) given a pyramid level at once in NumPy
   ``INSTANCED``); quality "fast" shaded in the same pass (splat.frag
   ``FORWARD``), "high" and "blend" by their own passes;
 - volume: each visible instance's screen box, farthest first, ray-marched in
-  the instance's own frame (the camera and lights moved by the inverse
-  transform; rigid motions with a uniform scale), blended "over".
+  the instance's own frame (the camera moved by the inverse transform, in
+  float64 on the CPU for all instances at once; the lights turned per
+  fragment; rigid motions with a uniform scale), blended "over": one
+  instanced draw call per (asset, level) group and depth slab.
 
 Instances are never Python objects: per frame a renderer writes the drawn
 instances' 68 bytes each into one buffer per draw call.
@@ -325,9 +327,29 @@ def _similarity(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
     return s, rot, ok
 
 
+#: Draw a scene's volume instances by instanced draw calls (one per (asset,
+#: level) group and depth slab); False: one pass per instance, as first
+#: written (kept for comparison; read at each frame).
+VOLUME_INSTANCED = True
+#: The instances' back-to-front order is cut into this many depth slabs of
+#: equal counts, and each slab draws its (asset, level) groups farthest
+#: first: calls at most slabs x groups, and instances of different groups
+#: composed out of order only inside a slab (read at each frame).
+VOLUME_DEPTH_SLABS = 16
+
+
 def _draw_volume(impl, up: SceneUpload, view: FrameView, fbo, opts) -> DrawStats:
     """Back to front over the visible instances of every asset (one sort), each
-    ray-marched inside its screen box in its own frame, blended "over"."""
+    ray-marched inside its screen box in its own frame, blended "over".
+
+    Instanced (:data:`VOLUME_INSTANCED`): the sorted instances of one (asset,
+    level) group and depth slab (:data:`VOLUME_DEPTH_SLABS`) go, in that
+    order, into one instance buffer and one draw call
+    (:meth:`~aniso3d.rendering.volume.VolumeRenderer.draw_instanced`). GL
+    draws instances in order, so "over" blending composes correctly between
+    instance boxes that do not interpenetrate; overlapping boxes compose as
+    wholes (approximate, as with one pass per instance), and so do instances
+    of different groups within one slab."""
     t0 = time.perf_counter()
     pixel_error = 1.0 if opts.pixel_error is None else opts.pixel_error
     cone = ViewCone.of(view.camera, view.size, view.near, view.far)
@@ -356,6 +378,7 @@ def _draw_volume(impl, up: SceneUpload, view: FrameView, fbo, opts) -> DrawStats
     lighting = view.lighting
     black = replace(lighting, background=(0.0, 0.0, 0.0))
     drawn = 0
+    calls = 0
     vopts = replace(opts, pixel_error=None)
     impl.blend_over = True
     target.depth_mask = False
@@ -370,34 +393,87 @@ def _draw_volume(impl, up: SceneUpload, view: FrameView, fbo, opts) -> DrawStats
         rot_t = np.swapaxes(m[:, :3, :3], 1, 2) / scale[:, None, None]  # R^T
         eye = np.einsum("nij,nj->ni", rot_t, np.asarray(cam.position) - m[:, :3, 3]) / scale[:, None]
         axes = np.einsum("nij,jk->nki", rot_t, np.stack(cam.basis(), axis=1))  # (N, 3 axes, 3)
-        dirs = lighting.directions()
-        local_dirs = np.einsum("nij,lj->nli", rot_t, dirs)
-        base = black.uniforms()
-        for row in range(len(table)):
-            i, _, level, x, y, z, r = table[row]
-            box = _screen_box(x, y, z, r, cone, w, h)
-            if box is None:
-                continue
-            light_dir = list(base["u_light_dir"])
-            light_dir[: len(dirs)] = [tuple(map(float, d)) for d in local_dirs[row]]
-            local_view = FrameView(
-                _LocalCamera(tuple(map(float, eye[row])), cam.fov, tuple(axes[row])),
-                _LocalLighting({**base, "u_light_dir": light_dir}, black.background),
-                view.size, view.near / scale[row], view.far / scale[row], view.ssaa,
-            )  # fmt: skip
-            target.scissor = box
-            # The pass writes every pixel of the box, the "over" operator by blending.
-            stats = impl.draw(up.handles[int(i)].levels[int(level)], local_view, fbo=target, options=vopts)
-            drawn += stats.drawn
+        if VOLUME_INSTANCED:
+            calls, drawn = _draw_volume_instanced(impl, up, replace(view, lighting=black), table, scale, eye,
+                                                  axes, cone, vopts)  # fmt: skip
+        else:
+            dirs = lighting.directions()
+            local_dirs = np.einsum("nij,lj->nli", rot_t, dirs)
+            base = black.uniforms()
+            for row in range(len(table)):
+                i, _, level, x, y, z, r = table[row]
+                box = _screen_box(x, y, z, r, cone, w, h)
+                if box is None:
+                    continue
+                light_dir = list(base["u_light_dir"])
+                light_dir[: len(dirs)] = [tuple(map(float, d)) for d in local_dirs[row]]
+                local_view = FrameView(
+                    _LocalCamera(tuple(map(float, eye[row])), cam.fov, tuple(axes[row])),
+                    _LocalLighting({**base, "u_light_dir": light_dir}, black.background),
+                    view.size, view.near / scale[row], view.far / scale[row], view.ssaa,
+                )  # fmt: skip
+                target.scissor = box
+                # The pass writes every pixel of the box, the "over" operator by blending.
+                stats = impl.draw(up.handles[int(i)].levels[int(level)], local_view, fbo=target, options=vopts)
+                drawn += stats.drawn
+                calls += 1
     finally:
         impl.blend_over = False
         target.depth_mask = True
         target.scissor = None
         ctx.disable(moderngl.BLEND)
         ctx.blend_func = moderngl.DEFAULT_BLENDING
-    lod.update(voxels=drawn)
+        ctx.depth_func = "<"
+    lod.update(voxels=drawn, draw_calls=calls)
     used = tuple(int(lvl) for lvl, n in enumerate(lod["instances_per_level"]) if n)
     return DrawStats(drawn=drawn, unit="voxels", levels=used, lod=lod)
+
+
+def _draw_volume_instanced(impl, up: SceneUpload, view: FrameView, table: np.ndarray, scale: np.ndarray,
+                           eye: np.ndarray, axes: np.ndarray, cone: ViewCone, opts) -> tuple[int, int]:  # fmt: skip
+    """The sorted ``table`` (rows asset, instance, level, eye-frame centre,
+    radius) drawn by instanced calls, each instance with the camera ``eye``
+    (N, 3) and ``axes`` (N, 3, 3) moved into its frame and its ``scale``
+    (N,); returns the number of draw calls and the voxels drawn."""
+    from aniso3d.rendering.volume import instance_rays
+
+    w, h = view.size
+    boxes = _screen_boxes(table[:, 3:7], cone, w, h)
+    keep = np.flatnonzero(boxes[:, 2] > 0)
+    if not len(keep):
+        return 0, 0
+    table, boxes, scale, eye, axes = table[keep], boxes[keep], scale[keep], eye[keep], axes[keep]
+    asset, level = table[:, 0].astype(np.int64), table[:, 2].astype(np.int64)
+    pairs, group = np.unique(np.stack([asset, level], axis=1), axis=0, return_inverse=True)
+    group = group.reshape(-1)
+    grids = [up.handles[int(a)].levels[int(lv)] for a, lv in pairs]
+    origin = np.stack([g.grid_origin for g in grids])[group]
+    size = np.array([g.voxel_size for g in grids])[group]
+    shape = np.stack([np.asarray(g.shape, dtype=np.float64) for g in grids])[group]
+    rays = instance_rays(origin, size, shape, eye, axes, view.near / scale, view.far / scale)
+    ndc = np.stack([boxes[:, 0] / w, boxes[:, 1] / h, (boxes[:, 0] + boxes[:, 2]) / w,
+                    (boxes[:, 1] + boxes[:, 3]) / h], axis=1) * 2.0 - 1.0  # fmt: skip
+    rows = np.concatenate([ndc, rays], axis=1).astype(np.float32)
+    # Calls: (slab, group), each slab's groups by their members' mean rank.
+    n = len(rows)
+    rank = np.arange(n)
+    slab = rank * max(1, int(VOLUME_DEPTH_SLABS)) // n
+    keys, call = np.unique(slab * len(pairs) + group, return_inverse=True)
+    call = call.reshape(-1)
+    mean_rank = np.bincount(call, rank) / np.bincount(call)
+    order = np.lexsort((mean_rank, keys // len(pairs)))
+    by_call = np.argsort(call, kind="stable")  # the rows of each call, in rank order
+    first = np.searchsorted(call[by_call], np.arange(len(keys) + 1))
+    ctx = impl.gl.ctx
+    ctx.enable(moderngl.DEPTH_TEST | moderngl.BLEND)
+    ctx.disable(moderngl.CULL_FACE)
+    ctx.depth_func = "1"  # always: the frame composes by blending alone
+    ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
+    for k in order:
+        sel = by_call[first[k]:first[k + 1]]
+        impl.draw_instanced(grids[int(keys[k] % len(pairs))], view, rows[sel], opts)
+    voxels = np.array([g.n_voxels for g in grids], dtype=np.int64)
+    return len(keys), int(voxels[group].sum())
 
 
 @dataclass(frozen=True)
@@ -427,6 +503,30 @@ class _LocalLighting:
 
     def uniforms(self) -> dict:
         return self.values
+
+
+def _screen_boxes(spheres: np.ndarray, cone: ViewCone, w: int, h: int) -> np.ndarray:
+    """:func:`_screen_box` of (N, 4) spheres (eye-frame centre, radius) at
+    once: (N, 4) pixel boxes (x, y, width, height), width 0 where none."""
+    x, y, z, r = spheres.T
+    out = np.zeros((len(spheres), 4))
+    whole = z - r <= max(cone.near, 1e-9)
+    tx, ty = cone.sx / cone.cx, cone.sy / cone.cy
+    zn = np.where(whole, 1.0, z - r)
+    zf = np.where(whole, 1.0, z + r)
+    x0 = np.where(x - r < 0, (x - r) / zn, (x - r) / zf) / tx
+    x1 = np.where(x + r > 0, (x + r) / zn, (x + r) / zf) / tx
+    y0 = np.where(y - r < 0, (y - r) / zn, (y - r) / zf) / ty
+    y1 = np.where(y + r > 0, (y + r) / zn, (y + r) / zf) / ty
+    with np.errstate(invalid="ignore", over="ignore"):
+        px0 = np.maximum(0, np.floor((x0 * 0.5 + 0.5) * w) - 1)
+        px1 = np.minimum(w, np.ceil((x1 * 0.5 + 0.5) * w) + 1)
+        py0 = np.maximum(0, np.floor((y0 * 0.5 + 0.5) * h) - 1)
+        py1 = np.minimum(h, np.ceil((y1 * 0.5 + 0.5) * h) + 1)
+    ok = (px1 > px0) & (py1 > py0)
+    out[ok] = np.stack([px0, py0, px1 - px0, py1 - py0], axis=1)[ok]
+    out[whole] = (0, 0, w, h)
+    return out
 
 
 def _screen_box(x, y, z, r, cone: ViewCone, w: int, h: int) -> tuple[int, int, int, int] | None:

@@ -10,7 +10,10 @@ The arrays live in 2D textures (texelFetch; llvmpipe reads a storage buffer
 lane by lane), and each ray first finds its next occupied voxel, then
 composites it, so that a SIMD batch of pixels composites together
 (``march="skip"``); ``march="plain"`` keeps the first version for comparison
-(docs/volume_speed.md).
+(docs/volume_speed.md). A scene's instances of one grid are marched in one
+instanced draw call (:meth:`VolumeRenderer.draw_instanced`, ``INSTANCED`` in
+volume.vert/.frag): each instance's screen box, with the camera moved into
+its frame (:func:`instance_rays`).
 
 A voxel seen along the unit ray direction w (METHOD.md "Reference
 conventions"), with ``P(w) = |wx| + |wy| + |wz|`` and h the voxel edge:
@@ -1031,6 +1034,79 @@ class VolumeRenderer:
             self._variants[march] = (prog, self.gl.track(self.gl.ctx.vertex_array(prog, [])))
         return self._variants[march]
 
+    def _instanced_program(self, march: str) -> moderngl.Program:
+        """The program of a marching mode with ``INSTANCED`` (volume.vert)."""
+        key = f"{march}/instanced"
+        if key not in self._variants:
+            defines = {**self._defines, "INSTANCED": 1, **({"PLAIN_MARCH": 1} if march == "plain" else {})}
+            self._variants[key] = (self.gl.program("volume.vert", "volume.frag", defines=defines), None)
+        return self._variants[key][0]
+
+    def draw_instanced(
+        self, handle: GPUVolume, view: FrameView, instances: np.ndarray, options: VolumeOptions | None = None,
+    ) -> DrawStats:  # fmt: skip
+        """Ray-march several instances of one grid in one instanced draw call,
+        in the order of ``instances``, each blended "over" what the
+        framebuffer holds (the caller sets the blending, as for
+        :attr:`blend_over`). GL draws instances in order, so back to front
+        gives the right "over" composition between instances whose boxes do
+        not interpenetrate (overlapping boxes compose as wholes, approximately).
+
+        ``instances``: (N, 19) float32 rows of :data:`INSTANCE_FIELDS`: the
+        screen box in NDC and the camera moved into each instance's frame
+        (:func:`instance_rays`). ``view`` gives the world camera basis (the
+        lights are turned by the rotation between the two bases), the
+        lighting (world), the size and the field of view.
+        """
+        opts = VolumeOptions.resolve(options, {})
+        prog = self._instanced_program(opts.march)
+        cam = view.camera
+        right, up, forward = cam.basis()
+        t = float(np.tan(np.radians(cam.fov) / 2))
+        GLContext.set_uniforms(
+            prog,
+            {
+                "u_size": (float(view.size[0]), float(view.size[1])),
+                "u_forward": tuple(map(float, forward)),
+                "u_right": tuple(map(float, right)),
+                "u_up": tuple(map(float, up)),
+                "u_tan": (t * view.aspect, t),
+                "u_depth_k": float(view.far) / (float(view.far) - float(view.near)),
+                "u_shape": tuple(int(s) for s in handle.shape),
+                "u_bricks": tuple(int(s) for s in handle.bricks),
+                "u_center_g": tuple(float(s) / 2 for s in handle.shape),
+                "u_num_dirs": int(handle.n_directions),
+                "u_density_mode": DENSITY_MODES.index(opts.density),
+                "u_normal_mode": NORMAL_MODES.index(opts.normal),
+                "u_opacity_mode": OPACITY_MODES.index(opts.opacity),
+                "u_pixel_angle": 2.0 * t / float(view.size[1]),
+                "u_sheet_pixels": tuple(float(x) for x in SHEET_PIXELS),
+                "u_background": tuple(float(c) for c in view.lighting.background),
+            },
+            strict=False,
+        )
+        GLContext.set_uniforms(prog, view.lighting.uniforms(), strict=False)
+        if opts.march == "plain":
+            for binding, buf in enumerate(self._storage_buffers(handle).values()):
+                buf.bind_to_storage_buffer(binding)
+        else:
+            samplers = {_TEXTURES[name][0]: unit for unit, name in enumerate(handle.textures)}
+            GLContext.set_uniforms(prog, samplers, strict=False)
+            for unit, tex in enumerate(handle.textures.values()):
+                tex.use(location=unit)
+        rows = np.ascontiguousarray(instances, dtype=np.float32)
+        ctx = self.gl.ctx
+        buf = ctx.buffer(rows.tobytes())
+        fmt = " ".join(f"{k}f" if f"in_{name}" in prog else f"{4 * k}x" for name, k in INSTANCE_FIELDS) + "/i"
+        names = [f"in_{name}" for name, _ in INSTANCE_FIELDS if f"in_{name}" in prog]
+        vao = ctx.vertex_array(prog, [(buf, fmt, *names)])
+        try:
+            vao.render(moderngl.TRIANGLES, vertices=6, instances=len(rows))
+        finally:
+            vao.release()
+            buf.release()
+        return DrawStats(drawn=int(handle.n_voxels) * len(rows), unit="voxels")
+
     def _storage_buffers(self, handle: GPUVolume) -> dict[str, moderngl.Buffer]:
         """The plain marching's storage buffers of ``handle``, read back from
         its textures the first time (the same bytes)."""
@@ -1058,7 +1134,7 @@ class VolumeRenderer:
 
     def release_all(self) -> None:
         """Free the renderer's own GPU objects (the programs stay cached in the context)."""
-        self.gl.free(self.vao, *(vao for _, vao in self._variants.values()))
+        self.gl.free(self.vao, *(vao for _, vao in self._variants.values() if vao is not None))
         self.vao = None
         self._variants.clear()
 
@@ -1126,6 +1202,32 @@ def ray_base(
         "u_far_b": far_b,
         "u_depth_k": float(far) / (float(far) - float(near)),
     }
+
+
+#: Per-instance attributes of :meth:`VolumeRenderer.draw_instanced` (name in
+#: volume.vert without ``in_``, float32 components), in row order.
+INSTANCE_FIELDS = (("box", 4), ("forward", 3), ("right", 3), ("up", 3), ("base_c", 3), ("planes", 3))
+
+
+def instance_rays(
+    grid_origin: np.ndarray, voxel_size: np.ndarray, shape: np.ndarray, eye: np.ndarray, axes: np.ndarray,
+    near: np.ndarray, far: np.ndarray,
+) -> np.ndarray:  # fmt: skip
+    """:func:`ray_base` for many instances at once (float64, vectorised):
+    (N, 15) rows ``forward, right, up, base_c, (base_s, near_b, far_b)`` of
+    :data:`INSTANCE_FIELDS` after the box. Per instance: ``grid_origin``
+    (N, 3), ``voxel_size`` (N,), ``shape`` (N, 3) of the grid drawn, and the
+    camera in the instance's frame: ``eye`` (N, 3), ``axes`` (N, 3, 3) right,
+    up, forward (unit), ``near``/``far`` (N,) (frame units, divided by the
+    instance's scale)."""
+    h = np.asarray(voxel_size, dtype=np.float64)
+    center_g = np.asarray(shape, dtype=np.float64) / 2
+    f = axes[:, 2]
+    eye_c = (np.asarray(eye, dtype=np.float64) - grid_origin) / h[:, None] - center_g
+    radius = np.linalg.norm(center_g, axis=1)
+    s_b = np.maximum(0.0, -np.einsum("ni,ni->n", eye_c, f) - radius)
+    planes = np.stack([s_b, near / h - s_b, far / h - s_b], axis=1)
+    return np.concatenate([f, axes[:, 0], axes[:, 1], eye_c + s_b[:, None] * f, planes], axis=1)
 
 
 def _check_choice(value, choices: tuple[str, ...], what: str) -> None:
