@@ -1,6 +1,7 @@
 """``aniso3d bench``: the speed/size/accuracy sweep (see :mod:`aniso3d.bench`),
 with ``--corpus`` the corpus bench (:mod:`aniso3d.bench.corpus`), and
-``aniso3d bench peers`` the point renderers side by side (:mod:`aniso3d.bench.peers`).
+``aniso3d bench peers`` the point renderers side by side (:mod:`aniso3d.bench.peers`)
+and ``aniso3d bench forest`` frame time against instance count (:mod:`aniso3d.bench.forest`).
 
 This module owns the command line: it parses the options, loads the input and
 hands the bench a mesh, the settings and a progress bar; the bench itself knows
@@ -26,7 +27,8 @@ def register(subparsers) -> None:
             "Sweep resolution, directions K, point placement, splat shape, quality, renderer and camera "
             "distance for a scene; write results.csv, results.json, plots and report.md into OUTDIR. "
             "'aniso3d bench peers' draws one point cloud with aniso3d and other point renderers "
-            "(see 'aniso3d bench peers --help')."
+            "(see 'aniso3d bench peers --help'); 'aniso3d bench forest' times forests of 1 to 10,000 trees "
+            "(see 'aniso3d bench forest --help')."
         ),
     )
     p.add_argument("mesh", nargs="?", default=None, help="mesh file or scene:NAME (default: the built-in tree)")
@@ -50,13 +52,67 @@ def register(subparsers) -> None:
     corpus.add_argument("--turntable", type=positive_int, default=None, metavar="N",
                         help="turntable frames for the flicker measurement (default: the preset's)")
     p.set_defaults(func=cmd_bench)
-    _add_peers(p)
+    _add_subcommands(p, {"peers": _peers_parser(p), "forest": _forest_parser(p)})
 
 
-def _add_peers(bench: argparse.ArgumentParser) -> None:
-    """``aniso3d bench peers``: a subcommand of ``bench``, whose first
-    positional is otherwise a mesh. argparse cannot have both, so the bench
-    parser hands everything after the word ``peers`` to the peers parser."""
+def _add_subcommands(bench: argparse.ArgumentParser, parsers: dict) -> None:
+    """``aniso3d bench WORD ...``: the bench's first positional is a mesh, so
+    its parser hands everything after one of these words to that word's parser."""
+    original = bench.parse_known_args
+
+    def parse_known_args(args=None, namespace=None):
+        args = list(sys.argv[1:] if args is None else args)
+        if args[:1] and args[0] in parsers:
+            ns, rest = parsers[args[0]].parse_known_args(args[1:], namespace)
+            ns.sub_argv = args[1:]
+            return ns, rest
+        return original(args, namespace)
+
+    bench.parse_known_args = parse_known_args
+
+
+def _forest_parser(bench: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    from aniso3d.bench.forest import COUNTS
+
+    forest = type(bench)(
+        prog="aniso3d bench forest",
+        description=(
+            "Frame time of aniso3d.scenes.forest(n) for each n, seen over the forest so that every forest "
+            "covers the same screen area, per renderer (polygons up to 1,000 trees), and the error of splats "
+            "and volume against 8x8 polygons up to 100 trees; writes forest.md and forest.png into OUTDIR "
+            "(needs matplotlib: pip install 'aniso3d[plots]')."
+        ),
+    )
+    forest.add_argument("--size", type=positive_int, default=512, help="square image size (default 512)")
+    forest.add_argument("--reps", type=positive_int, default=3, help="timed frames per method and count")
+    forest.add_argument("--error-size", type=positive_int, default=256, help="image size of the error table")
+    forest.add_argument("--counts", type=positive_int, nargs="+", default=list(COUNTS), metavar="N",
+                        help="tree counts (default: 1 10 100 1000 10000)")  # fmt: skip
+    forest.add_argument("--no-passes", action="store_true",
+                        help="leave out the volume drawn one pass per instance (the comparison)")  # fmt: skip
+    forest.add_argument("-o", "--output", default="bench-out", metavar="OUTDIR", help="output folder")
+    forest.add_argument("--backend", default="auto", help="OpenGL backend: auto, egl, osmesa, x11")
+    forest.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+    forest.set_defaults(func=cmd_forest, command="bench forest")
+    return forest
+
+
+def cmd_forest(args: argparse.Namespace) -> int:
+    from aniso3d.bench.forest import ForestSettings, run_forest, write_report
+
+    settings = ForestSettings(size=args.size, reps=args.reps, error_size=args.error_size, counts=tuple(args.counts),
+                              no_passes=args.no_passes, backend=args.backend)  # fmt: skip
+    progress = Progress("bench forest", enabled=False if args.quiet else None)
+    rows, errors, load = run_forest(settings, progress=progress)
+    for r in rows:
+        print(f"{r['n']:>6} trees  {r['method']:<14} {r['median_ms']:8.1f} ms ({r['min_ms']:.1f}-{r['max_ms']:.1f})")
+    command = "aniso3d bench forest " + shlex.join(args.sub_argv)
+    print(f"wrote {write_report(rows, errors, load, settings, Path(args.output), command)}")
+    return 0
+
+
+def _peers_parser(bench: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """``aniso3d bench peers``: the point renderers side by side (see :func:`_add_subcommands`)."""
     from aniso3d.bench.peers import CONTENDERS
 
     peers = type(bench)(
@@ -81,17 +137,7 @@ def _add_peers(bench: argparse.ArgumentParser) -> None:
     peers.add_argument("--backend", default="auto", help="OpenGL backend of aniso3d's contenders")
     peers.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
     peers.set_defaults(func=cmd_peers, command="bench peers")
-    original = bench.parse_known_args
-
-    def parse_known_args(args=None, namespace=None):
-        args = list(sys.argv[1:] if args is None else args)
-        if args[:1] == ["peers"]:
-            ns, rest = peers.parse_known_args(args[1:], namespace)
-            ns.peers_argv = args[1:]
-            return ns, rest
-        return original(args, namespace)
-
-    bench.parse_known_args = parse_known_args
+    return peers
 
 
 def _contender_list(text: str) -> tuple[str, ...]:
@@ -128,7 +174,7 @@ def cmd_peers(args: argparse.Namespace) -> int:
         if r.status == "skipped":
             print(f"skipped: {r.label}: {r.note}")
     if args.output is not None:
-        print(f"wrote {write_report(result, args.output, peers_command(args.peers_argv))}")
+        print(f"wrote {write_report(result, args.output, peers_command(args.sub_argv))}")
     return 0
 
 
