@@ -46,43 +46,8 @@ from pathlib import Path
 import numpy as np
 import plyfile
 
-MAJOR, MINOR, NOISE = 1.0, 0.4, 0.001
-AZIMUTH, ELEVATION = 20.0, 40.0
-
-
-def torus_points(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``n`` points uniform over the torus's area (y-up, around the y axis),
-    moved along the normal by N(0, NOISE): positions (n, 3), unit normals
-    (n, 3) and colours (n, 3) in [0, 1]."""
-    rng = np.random.default_rng(seed)
-    u = rng.uniform(0, 2 * np.pi, n)
-    # The area element is proportional to MAJOR + MINOR cos v: rejection-sample v.
-    v = np.zeros(0)
-    while len(v) < n:
-        cand = rng.uniform(0, 2 * np.pi, 2 * n)
-        keep = rng.uniform(0, MAJOR + MINOR, 2 * n) < MAJOR + MINOR * np.cos(cand)
-        v = np.concatenate([v, cand[keep]])
-    v = v[:n]
-    normal = np.stack([np.cos(v) * np.cos(u), np.sin(v), np.cos(v) * np.sin(u)], axis=1)
-    centre = np.stack([MAJOR * np.cos(u), np.zeros(n), MAJOR * np.sin(u)], axis=1)
-    pos = centre + (MINOR + rng.normal(0, NOISE, n))[:, None] * normal
-    colour = np.stack([0.55 + 0.35 * np.sin(6 * u), 0.5 + 0.3 * np.cos(3 * v), 0.45 + 0.25 * np.sin(4 * u + v)], 1)
-    return pos, normal, colour
-
-
-def torus_mesh(nu: int = 1024, nv: int = 512):
-    """The same torus as polygons (the ground truth)."""
-    from aniso3d.build.mesh import Mesh
-
-    u, v = np.meshgrid(np.linspace(0, 2 * np.pi, nu, endpoint=False), np.linspace(0, 2 * np.pi, nv, endpoint=False),
-                       indexing="ij")  # fmt: skip
-    ring = MAJOR + MINOR * np.cos(v)
-    pos = np.stack([ring * np.cos(u), MINOR * np.sin(v), ring * np.sin(u)], axis=-1).reshape(-1, 3)
-    i, j = np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij")
-    a, b = i * nv + j, ((i + 1) % nu) * nv + j
-    c, d = ((i + 1) % nu) * nv + (j + 1) % nv, i * nv + (j + 1) % nv
-    faces = np.concatenate([np.stack([a, d, c], -1).reshape(-1, 3), np.stack([a, c, b], -1).reshape(-1, 3)])
-    return Mesh.from_arrays(pos, faces, (0.6, 0.5, 0.4), 0.1, 16.0, name="torus")
+# The torus of `aniso3d bench peers`: the same points and the same truth.
+from aniso3d.bench.peers import AZIMUTH, ELEVATION, MAJOR, MINOR, torus_mesh, torus_points  # noqa: E402
 
 
 def bbox_area(path: Path) -> float:
