@@ -485,3 +485,31 @@ def test_cli_scene_bad_arguments(tmp_path, capsys):
         code = main([*argv, "-o", str(tmp_path / "x.png")])
         err = capsys.readouterr().err
         assert code == 2 and words in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("method", ["mesh", "splat", "volume"])
+def test_a_far_instance_does_not_clip_the_near_ones(method):
+    """Near and far come from the instances' spheres, not the scene's box:
+    a quad a million units away must not push the near plane past a close one."""
+    near_only = Scene()
+    near_only.add(scenes.quad(), np.eye(4))
+    both = Scene()
+    both.add(scenes.quad(), np.stack([np.eye(4), translation(1e6, 0, 0)]))
+    cam = Camera((0.0, 0.0, 3.0), target=(0.0, 0.0, 0.0))
+    opts = {} if method == "mesh" else {"resolution": 8}
+    with aniso3d.Renderer((64, 64)) as r:
+        alone = r.render(near_only, cam, method, alpha=True, **opts)
+        with_far = r.render(both, cam, method, alpha=True, **opts)
+    assert (alone[..., 3] > 0).mean() > 0.1  # the close quad is drawn
+    assert np.abs(alone.astype(int) - with_far.astype(int)).max() <= 2
+
+
+def test_a_scene_made_by_its_constructor_is_checked():
+    quad = scenes.quad()
+    sc = Scene(assets=[quad], transforms=[np.eye(4)[None]])
+    assert sc.tints[0].shape == (1, 3) and sc.transforms[0].dtype == np.float32
+    with pytest.raises(InputError, match="singular"):
+        Scene(assets=[quad], transforms=[np.diag([1.0, 0.0, 1.0, 1.0])[None]])
+    with pytest.raises(InputError, match="per asset"):
+        Scene(assets=[quad], transforms=[])
+    assert Scene().add(quad, np.eye(4), tints=[[255, 0, 0]]) == 0  # integer tints are 0-255

@@ -69,7 +69,7 @@ def as_transforms(transforms, what: str = "transforms") -> np.ndarray:
 
 
 def as_tints(tints, n: int) -> np.ndarray:
-    """(n, 3) uint8 tints: None -> white; uint8 as is; floats in [0, 1] scaled by 255."""
+    """(n, 3) uint8 tints: None -> white; integers 0-255 as they are; floats in [0, 1] scaled by 255."""
     if tints is None:
         return np.full((n, 3), 255, dtype=np.uint8)
     t = np.asarray(tints)
@@ -81,8 +81,12 @@ def as_tints(tints, n: int) -> np.ndarray:
         return np.ascontiguousarray(t)
     if not (np.issubdtype(t.dtype, np.floating) or np.issubdtype(t.dtype, np.integer)):
         raise InputError(f"tints must be numbers, got dtype {t.dtype}")
+    if np.issubdtype(t.dtype, np.integer):
+        if t.size and (t.min() < 0 or t.max() > 255):
+            raise InputError("integer tints must be in 0-255 (or give floats in [0, 1])")
+        return np.ascontiguousarray(t, dtype=np.uint8)
     t = t.astype(np.float64)
-    if not np.isfinite(t).all() or t.min() < 0.0 or t.max() > 1.0:
+    if t.size and (not np.isfinite(t).all() or t.min() < 0.0 or t.max() > 1.0):
         raise InputError("float tints must be finite and in [0, 1] (or give uint8 values 0-255)")
     return np.round(t * 255.0).astype(np.uint8)
 
@@ -103,6 +107,20 @@ class Scene:
     tints: list[np.ndarray] = field(default_factory=list)
     name: str = "scene"
     _bounds: list[np.ndarray] = field(default_factory=list, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        # A scene made by its constructor gets the checks of add().
+        if not (len(self.assets) == len(self.transforms)) or (self.tints and len(self.tints) != len(self.assets)):
+            raise InputError(f"a scene needs one transform array (and one tint array, if any) per asset: got "
+                             f"{len(self.assets)} assets, {len(self.transforms)} transform arrays and "
+                             f"{len(self.tints)} tint arrays")  # fmt: skip
+        for mesh in self.assets:
+            if not isinstance(mesh, Mesh):
+                raise InputError(f"a scene's asset must be an aniso3d Mesh, got {type(mesh).__name__}")
+        self.transforms = [as_transforms(m) for m in self.transforms]
+        tints = self.tints or [None] * len(self.assets)
+        self.tints = [as_tints(t, len(m)) for t, m in zip(tints, self.transforms, strict=True)]
+        self._bounds = [mesh.bounds for mesh in self.assets]
 
     def add(self, mesh: Mesh, transforms, tints=None) -> int:
         """Place ``mesh`` by every matrix of ``transforms`` ((N, 4, 4), (N, 3, 4)
@@ -235,13 +253,14 @@ def load_scene(path: str | os.PathLike, name: str | None = None) -> Scene:
         raise InputError(f"could not read glTF scene '{p}': {type(exc).__name__}: {exc}") from None
     doc = None
     groups: dict[str, list[np.ndarray]] = {}
+    extensions = _node_extensions(tscene)
     for node in tscene.graph.nodes_geometry:
         transform, geom_name = tscene.graph[node]
         geom = tscene.geometry.get(geom_name)
         if not isinstance(geom, trimesh.Trimesh) or len(geom.faces) == 0:
             continue
         world = np.asarray(transform, dtype=np.float64)[None]
-        ext = _node_extensions(tscene, node).get("EXT_mesh_gpu_instancing")
+        ext = extensions.get(node, {}).get("EXT_mesh_gpu_instancing")
         if ext is not None:
             if doc is None:
                 doc = _GltfData(p)
@@ -255,14 +274,15 @@ def load_scene(path: str | os.PathLike, name: str | None = None) -> Scene:
     return scene
 
 
-def _node_extensions(tscene, node) -> dict:
-    """The glTF ``extensions`` of the node whose edge leads to ``node``
-    (trimesh keeps them in the edge's metadata)."""
-    data = tscene.graph.transforms.edge_data
-    for (_, child), attrs in data.items():
-        if child == node:
-            return (attrs.get("metadata") or {}).get("gltf_extensions") or {}
-    return {}
+def _node_extensions(tscene) -> dict:
+    """Per node, the glTF ``extensions`` of the edge that leads to it (trimesh
+    keeps them in the edge's metadata); one pass over the edges."""
+    out = {}
+    for (_, child), attrs in tscene.graph.transforms.edge_data.items():
+        ext = (attrs.get("metadata") or {}).get("gltf_extensions")
+        if ext:
+            out[child] = ext
+    return out
 
 
 class _GltfData:

@@ -455,14 +455,15 @@ class Renderer:
         impl = self.method_renderer(method)
         opts = impl.Options.resolve(options, values)
         if isinstance(thing, Scene):  # instances of shared assets: aniso3d.rendering.scene_draw
-            from aniso3d.rendering.scene_draw import draw_scene, upload_scene
+            from aniso3d.rendering.scene_draw import draw_scene, scene_clip_range, upload_scene
 
             handle = upload_scene(self, thing, method, b)
             draw = lambda: draw_scene(impl, handle, view, fbo, opts)  # noqa: E731
+            near, far = scene_clip_range(handle, camera)
         else:
             handle = self.upload(thing, method, build=b)
             draw = lambda: impl.draw(handle, view, fbo=fbo, options=opts)  # noqa: E731
-        near, far = camera.clip_range(handle.bounds)
+            near, far = camera.clip_range(handle.bounds)
         view = FrameView(camera, self.lighting, (fw, fh), near, far, ssaa)
         fbo = self._fbo((fw, fh))
         t0 = time.perf_counter()

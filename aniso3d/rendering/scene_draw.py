@@ -53,7 +53,7 @@ class SceneUpload:
     (a :class:`~aniso3d.rendering.polygon.GPUMesh`, a pyramid of points or of
     volumes) and its pyramid's voxel sizes (finest first). ``origin`` is the
     frame-local origin every instance matrix is made relative to (float64);
-    ``bounds`` the scene's world box (grown by the largest splat)."""
+    ``bounds`` the scene's world box."""
 
     scene: Scene
     method: str
@@ -91,6 +91,37 @@ def _spheres(up: SceneUpload, i: int, margin: float = 0.0):
     """Asset ``i``'s instance spheres (made per frame: the scene's arrays may change)."""
     c, r, s = instance_spheres(up.scene.transforms[i], up.scene.asset_bounds(i))
     return c, r + margin * s, s
+
+
+def scene_clip_range(up: SceneUpload, camera) -> tuple[float, float]:
+    """(near, far) from the instances' own bounding spheres, not the scene's
+    box: one far instance must not push the near plane past the close ones.
+    Near is the nearest sphere in front, but never less than 1e-4 of that
+    sphere's radius (an eye inside an instance) nor 1e-6 of far; the camera's
+    own ``near``/``far`` win when set."""
+    eye = np.asarray(camera.position, dtype=np.float64)
+    fwd = np.asarray(camera.forward, dtype=np.float64)
+    near_auto, near_radius, far_auto = np.inf, 0.0, -np.inf
+    for i in range(len(up.scene.assets)):  # per asset; the instances at once
+        c, r, _ = _spheres(up, i)
+        if not len(r):
+            continue
+        d = (c - eye) @ fwd
+        front, back = d - 1.01 * r, d + 1.01 * r
+        far_auto = max(far_auto, float(back.max()))
+        ahead = back > 0
+        if ahead.any():
+            k = int(np.argmin(np.where(ahead, front, np.inf)))
+            if front[k] < near_auto:
+                near_auto, near_radius = float(front[k]), float(r[k])
+    if not np.isfinite(near_auto):  # nothing ahead: any valid range draws nothing
+        return camera.clip_range(up.bounds)
+    near_auto = max(near_auto, 1e-4 * near_radius, 1e-6 * far_auto, 1e-30)
+    near = camera.near if camera.near is not None else near_auto
+    far = camera.far if camera.far is not None else far_auto
+    if far <= near:
+        far = near * 2.0
+    return float(near), float(far)
 
 
 def draw_scene(impl, up: SceneUpload, view: FrameView, fbo, opts) -> DrawStats:

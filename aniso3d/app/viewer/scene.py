@@ -37,7 +37,7 @@ from aniso3d.rendering.base import DrawOptions, MethodRenderer
 from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.frame import DrawStats, FrameView
 from aniso3d.rendering.renderer import BuildOptions, Renderer
-from aniso3d.rendering.scene_draw import SceneUpload, draw_scene, upload_scene
+from aniso3d.rendering.scene_draw import SceneUpload, draw_scene, scene_clip_range, upload_scene
 
 
 @dataclass
@@ -228,7 +228,10 @@ class SceneView:
             try:
                 handle = self.handle(s.method, shown.impl, shown.data, shown.key)
                 camera = state.orbit.camera()
-                near, far = camera.clip_range(handle.bounds)
+                if isinstance(handle, SceneUpload):
+                    near, far = scene_clip_range(handle, camera)
+                else:
+                    near, far = camera.clip_range(handle.bounds)
                 view = FrameView(camera, self.renderer.lighting, fsize, near, far, ssaa)
                 fbo.use()
                 t0 = time.perf_counter()
