@@ -199,6 +199,22 @@ def test_gltf_ext_mesh_gpu_instancing(tmp_path):
     np.testing.assert_allclose(trs_matrices(t, q, s)[:, :3, 3], t)
 
 
+@pytest.mark.parametrize("attributes", [["TRANSLATION", 2], {"TRANSLATION": "x"}, {"TRANSLATION": 2.5}])
+def test_gltf_damaged_instancing_is_one_clear_error(tmp_path, attributes):
+    t = np.zeros((2, 3))
+    p = tmp_path / "damaged.gltf"
+    node = {"mesh": 0, "extensions": {"EXT_mesh_gpu_instancing": {"attributes": attributes}}}
+    _gltf(p, [node], [t])
+    with pytest.raises(InputError, match="EXT_mesh_gpu_instancing"):
+        load_scene(p)
+
+
+def test_zero_quaternions_are_refused():
+    q = np.array([[0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0, 0.0]])
+    with pytest.raises(InputError, match="quaternion"):
+        trs_matrices(np.zeros((2, 3)), q, np.ones((2, 3)))
+
+
 def test_gltf_refuses_other_files(tmp_path):
     p = tmp_path / "x.obj"
     p.write_text("v 0 0 0\n")

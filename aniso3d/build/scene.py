@@ -342,8 +342,14 @@ class _GltfData:
 
     def instance_matrices(self, ext: dict) -> np.ndarray:
         """(N, 4, 4) matrices T R S of an ``EXT_mesh_gpu_instancing`` extension."""
-        attrs = ext.get("attributes", {})
-        values = {k: self.accessor(int(v)) for k, v in attrs.items() if k in ("TRANSLATION", "ROTATION", "SCALE")}
+        attrs = ext.get("attributes", {}) if isinstance(ext, dict) else None
+        if not isinstance(attrs, dict) or not all(
+            isinstance(v, int) and not isinstance(v, bool) for k, v in attrs.items()
+            if k in ("TRANSLATION", "ROTATION", "SCALE")
+        ):  # fmt: skip
+            raise InputError("EXT_mesh_gpu_instancing needs 'attributes': an object of accessor indices "
+                             f"(got {attrs!r}); the glTF file is damaged")  # fmt: skip
+        values = {k: self.accessor(v) for k, v in attrs.items() if k in ("TRANSLATION", "ROTATION", "SCALE")}
         if not values:
             raise InputError("EXT_mesh_gpu_instancing without TRANSLATION, ROTATION or SCALE attributes")
         n = {len(v) for v in values.values()}
@@ -360,7 +366,11 @@ def trs_matrices(translation: np.ndarray, rotation: np.ndarray, scale: np.ndarra
     """(N, 4, 4) float64 ``T R S`` from (N, 3) translations, (N, 4) unit
     quaternions (x, y, z, w: glTF's order) and (N, 3) scales."""
     q = np.asarray(rotation, dtype=np.float64)
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    length = np.linalg.norm(q, axis=1, keepdims=True)
+    if not (np.isfinite(length).all() and (length > 1e-6).all()):
+        raise InputError("rotations must be non-zero quaternions (x, y, z, w); "
+                         f"{int((~(length > 1e-6)).sum())} are zero or not finite")  # fmt: skip
+    q = q / length
     x, y, z, w = q.T
     r = np.stack([
         np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=1),
