@@ -37,3 +37,24 @@ def test_bad_forest_settings_are_one_clear_error():
         run_forest(ForestSettings(counts=(0,)))
     with pytest.raises(InputError, match="positive"):
         run_forest(ForestSettings(reps=0))
+
+
+def test_a_bad_output_is_refused_before_the_run(tmp_path, capsys, monkeypatch):
+    import aniso3d.bench.forest as forest
+
+    monkeypatch.setattr(forest, "run_forest", lambda *a, **k: pytest.fail("the bench ran"))
+    (tmp_path / "afile").write_text("x")
+    code = main(["bench", "forest", "--counts", "1", "-o", str(tmp_path / "afile"), "-q"])
+    assert code == 2 and "is a file" in capsys.readouterr().err
+
+
+def test_counts_beyond_the_error_range_write_no_error_table(tmp_path):
+    pytest.importorskip("matplotlib")
+    from pathlib import Path
+
+    from aniso3d.bench.forest import write_report
+
+    rows = [{"n": 200, "method": "splat", "median_ms": 1.0, "min_ms": 1.0, "max_ms": 1.0, "visible": 201,
+             "points": 10, "levels": [201], "selection_ms": 0.1, "calls": 1}]  # fmt: skip
+    page = write_report(rows, [], [0.5], ForestSettings(counts=(200,)), Path(tmp_path), "test").read_text()
+    assert "| 200 | splat | 1 (1-1) | 201 |" in page and "Error against" not in page

@@ -197,6 +197,25 @@ def test_missing_dask_is_one_clear_message(mesh, cams, tmp_path, capsys, monkeyp
     assert code == 2 and err.count("\n") == 1 and "pip install 'aniso3d[cluster]'" in err
 
 
+def test_a_malformed_scheduler_address_is_one_clear_message(tmp_path, capsys):
+    pytest.importorskip("distributed")
+    code = main(["frames", "scene:lattice", "--frames", "2", "--size", "32", "-o", str(tmp_path / "f"),
+                 "--scheduler", "foo", "-q"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "tcp://host:8786" in err
+
+
+def test_a_scene_on_a_local_cluster_takes_the_scene_resolution(tmp_path, capsys):
+    pytest.importorskip("distributed")
+    args = ["frames", "--scene", "forest", "--trees", "2", "--frames", "2", "--size", "32", "-q", "--method", "splat"]
+    assert main(args + ["-o", str(tmp_path / "serial")]) == 0
+    assert main(args + ["-o", str(tmp_path / "dask"), "--workers", "2"]) == 0
+    assert "texture 64³ per asset" in capsys.readouterr().out
+    for i in range(2):
+        name = f"frame_{i:04d}.png"
+        assert np.array_equal(load_png(tmp_path / "serial" / name), load_png(tmp_path / "dask" / name))
+
+
 def test_egl_device_option_and_environment(monkeypatch):
     try:
         with GLContext(device=0) as gl:

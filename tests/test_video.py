@@ -95,6 +95,21 @@ def test_mp4_pads_an_odd_size_and_keeps_the_frame_rate(tmp_path):
         assert mad(got[33], got[32]) < 4.0 and mad(got[:, 47], got[:, 46]) < 4.0  # the padding repeats the edge
 
 
+def test_a_failing_encoder_never_replaces_the_old_video(tmp_path, monkeypatch):
+    """imageio-ffmpeg ignores ffmpeg's exit status: the file is read back."""
+    pytest.importorskip("imageio_ffmpeg")
+    fake = tmp_path / "ffmpeg"
+    fake.write_text("#!/bin/sh\ncat > /dev/null\nfor last; do :; done\necho truncated > \"$last\"\nexit 1\n")
+    fake.chmod(0o755)
+    old = tmp_path / "kept.mp4"
+    old.write_bytes(b"the user's video")
+    monkeypatch.setenv("IMAGEIO_FFMPEG_EXE", str(fake))
+    with pytest.raises(ResourceError, match="nothing was written"):
+        write_video([np.zeros((8, 8, 3), np.uint8)] * 3, old, fps=10)
+    assert old.read_bytes() == b"the user's video"
+    assert leftovers(tmp_path) == []
+
+
 @pytest.mark.parametrize("ext", ["gif", "webp", "mp4"])
 @pytest.mark.parametrize("failure", [RuntimeError, KeyboardInterrupt])
 def test_a_failing_write_leaves_the_old_file_and_no_temporary(tmp_path, ext, failure):
@@ -142,6 +157,8 @@ def test_missing_imageio_ffmpeg_names_the_extra(tmp_path, monkeypatch, capsys):
         ([np.zeros((4, 4, 3), np.uint8), np.zeros((4, 5, 3), np.uint8)], "t.webp", 10, "one size"),
         ([np.zeros((4, 4, 3), np.float32)], "t.gif", 10, "uint8"),
         ([np.zeros((4, 4, 3), np.uint8)], "missing/t.gif", 10, "does not exist"),
+        ([np.zeros((4, 4, 3), np.uint8)], "t.gif", 60, "GIF plays"),
+        ([np.zeros((4, 4, 3), np.uint8)], "t.mp4", 1e12, "MP4 plays"),
     ],
 )
 def test_bad_video_requests_are_one_clear_error(tmp_path, frames, path, fps, words):
@@ -178,3 +195,21 @@ def test_frames_command_writes_a_gif(tmp_path, capsys):
     code = main(["frames", "scene:blob", "--method", "mesh", "--size", "32", "--frames", "2",
                  "-o", str(tmp_path / "pngs"), "-q"])  # fmt: skip
     assert code == 0 and sorted(p.name for p in (tmp_path / "pngs").iterdir()) == ["frame_0000.png", "frame_0001.png"]
+
+
+def test_a_write_error_is_one_line(tmp_path, monkeypatch, capsys):
+    """A full disk or a read-only folder: one line naming the file, no traceback."""
+    import errno
+
+    import aniso3d.files
+
+    def full(path, data):
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+
+    monkeypatch.setattr(aniso3d.files, "atomic_write", full)
+    monkeypatch.setattr(aniso3d.rendering.video, "atomic_write", full)
+    code = main(["frames", "scene:lattice", "-r", "8", "--frames", "2", "--size", "32", "-q",
+                 "-o", str(tmp_path / "t.gif")])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1
+    assert "No space left on device" in err and "t.gif" in err

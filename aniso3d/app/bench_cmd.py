@@ -98,7 +98,9 @@ def _forest_parser(bench: argparse.ArgumentParser) -> argparse.ArgumentParser:
 
 
 def cmd_forest(args: argparse.Namespace) -> int:
-    from aniso3d.bench.forest import ForestSettings, run_forest, write_report
+    from aniso3d.bench.forest import ForestSettings, check_output, run_forest, write_report
+
+    check_output(Path(args.output))  # before the run, not after it
 
     settings = ForestSettings(size=args.size, reps=args.reps, error_size=args.error_size, counts=tuple(args.counts),
                               no_passes=args.no_passes, backend=args.backend)  # fmt: skip

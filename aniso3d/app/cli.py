@@ -67,6 +67,12 @@ def main(argv: list[str] | None = None) -> int:
         what = "frames finished so far are complete" if pngs else "no output was written"
         print(f"aniso3d {args.command}: interrupted; {what}", file=sys.stderr)
         return 128 + signal.SIGTERM if isinstance(exc, _Terminated) else 130
+    except OSError as exc:
+        # A file or folder that cannot be read or written (read-only, full,
+        # no permission): one line; outputs are atomic, so nothing half-written.
+        where = f" '{exc.filename}'" if exc.filename else ""
+        print(f"aniso3d {args.command}: error: {exc.strerror or exc}{where}", file=sys.stderr)
+        return 2
     except MemoryError:
         print(
             f"aniso3d {args.command}: error: out of memory; lower --resolution or --directions",

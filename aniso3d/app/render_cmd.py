@@ -464,6 +464,8 @@ def cmd_frames(args) -> int:
     cams = turntable(camera, args.frames, args.degrees)
     progress = Progress("frames", enabled=None if not args.quiet else False)
     if args.scheduler is not None or args.workers > 1:
+        if isinstance(thing, Scene) and method != "mesh" and args.resolution == AUTO:
+            args.resolution = SCENE_RESOLUTION
         result, where = _frames_on_cluster(thing, cams, None if video else out, method, progress, args)
         voxels = _path_voxels(thing, method, cams, args)
         if video:
@@ -513,6 +515,8 @@ def _frames_on_cluster(thing, cams, folder: Path | None, method: str, progress, 
 
 def _path_voxels(thing, method: str, cams, args) -> str:
     """The words for the texture a path is drawn from ("" for none), without a GL context."""
+    if isinstance(thing, Scene) and method != "mesh":
+        return f"texture {args.resolution}³ per asset, {thing.n_instances:,} instances"
     if not isinstance(thing, Mesh) or method == "mesh":
         return ""
     if args.resolution != AUTO:

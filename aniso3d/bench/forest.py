@@ -119,12 +119,21 @@ def run_forest(args: ForestSettings, progress=None) -> tuple[list[dict], list[di
     return rows, errors, load
 
 
-def write_report(rows, errors, load, args: ForestSettings, out: Path, command: str) -> Path:
-    """forest.md and forest.png (matplotlib, the ``plots`` extra) into ``out``, atomically; the page's path."""
+def check_output(out: Path):
+    """Refuse, before a long run, an output that is a file and a missing
+    matplotlib; returns the matplotlib module."""
+    if out.exists() and not out.is_dir():
+        raise InputError(f"output '{out}' is a file; the forest bench writes forest.md and forest.png into a folder")
     try:
         import matplotlib
     except ImportError:
         raise ResourceError("the forest plot needs matplotlib: pip install 'aniso3d[plots]'") from None
+    return matplotlib
+
+
+def write_report(rows, errors, load, args: ForestSettings, out: Path, command: str) -> Path:
+    """forest.md and forest.png (matplotlib, the ``plots`` extra) into ``out``, atomically; the page's path."""
+    matplotlib = check_output(out)
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -176,16 +185,18 @@ def write_report(rows, errors, load, args: ForestSettings, out: Path, command: s
         if a and b:
             lines.append(f"- {m}: 100 trees {a['median_ms']:.0f} ms, 10,000 trees {b['median_ms']:.0f} ms: "
                          f"ratio {b['median_ms'] / a['median_ms']:.1f}.")  # fmt: skip
-    lines += [
-        "",
-        f"## Error against 8x8 supersampled polygons ({args.error_size}x{args.error_size})",
-        "",
-        "| trees | method | " + " | ".join(k for k in errors[0] if k not in ("n", "method")) + " |",
-        "| ---: | --- |" + " ---: |" * (len(errors[0]) - 2),
-    ]
+    keys = list(dict.fromkeys(k for e in errors for k in e if k not in ("n", "method")))
+    if errors:
+        lines += [
+            "",
+            f"## Error against 8x8 supersampled polygons ({args.error_size}x{args.error_size})",
+            "",
+            "| trees | method | " + " | ".join(keys) + " |",
+            "| ---: | --- |" + " ---: |" * len(keys),
+        ]
     for e in errors:
         lines.append(f"| {e['n']} | {e['method']} | " + " | ".join(
-            f"{v:.3g}" for k, v in e.items() if k not in ("n", "method")) + " |")  # fmt: skip
+            f"{e[k]:.3g}" if k in e else "-" for k in keys) + " |")  # fmt: skip
     lines += ["", "![frame time against trees](forest.png)", ""]
     return atomic_write(out / "forest.md", "\n".join(lines).encode())
 

@@ -261,6 +261,9 @@ def frame_client(client=None, workers: int | None = None, scheduler: str | None 
     if scheduler is not None and scheduler != "local":
         try:
             c = Client(scheduler, timeout=30)
+        except (ValueError, TypeError) as exc:
+            raise InputError(f"'{scheduler}' is not a Dask scheduler address ({exc}); give one like "
+                             "tcp://host:8786, or 'local'") from None  # fmt: skip
         except OSError as exc:
             raise ResourceError(f"cannot reach the Dask scheduler at '{scheduler}': {exc}") from None
         with c:

@@ -37,6 +37,11 @@ MP4_CRF = 18
 WEBP_QUALITY = 90
 
 
+#: Frame rates each format can hold: GIF stores delays in hundredths of a
+#: second and browsers slow delays under 20 ms to 100 ms, so at most 50.
+FPS_RANGE = {"GIF": (1 / 600, 50.0), "WebP": (1 / 600, 240.0), "MP4": (1 / 600, 240.0)}
+
+
 def is_video_path(path: str | os.PathLike) -> bool:
     """True when ``path`` names a video file aniso3d can write (by its suffix)."""
     return Path(path).suffix.lower() in VIDEO_FORMATS
@@ -58,6 +63,9 @@ def check_video_output(path: str | os.PathLike, fps: float) -> str:
         )
     if isinstance(fps, bool) or not isinstance(fps, int | float) or not math.isfinite(fps) or fps <= 0:
         raise InputError(f"frames per second must be a positive number, got {fps!r}")
+    low, high = FPS_RANGE[fmt]
+    if not low <= fps <= high:
+        raise InputError(f"{fmt} plays {low:g} to {high:g} frames per second; got {fps:g}")
     if p.is_dir():
         raise InputError(f"output '{p}' is a directory; name a {p.suffix} file to write")
     folder = p.parent if str(p.parent) else Path(".")
@@ -136,14 +144,25 @@ def _write_mp4(fh, frames: Iterator[np.ndarray], fps: float, folder: Path) -> No
                                      output_params=["-crf", str(MP4_CRF), "-movflags", "+faststart"],
                                      ffmpeg_log_level="error")  # fmt: skip
         writer.send(None)  # starts ffmpeg
+        sent = 0
         try:
             writer.send(first)
+            sent = 1
             for frame in frames:
                 writer.send(_even(frame))
+                sent += 1
         except BaseException:
             writer.close()  # stops ffmpeg; the half file is removed below
             raise
         writer.close()
+        # imageio-ffmpeg does not check ffmpeg's exit status: read the file
+        # back, so a failed encoder never replaces the user's video.
+        try:
+            got, _ = ffmpeg.count_frames_and_secs(tmp)
+        except Exception as exc:  # noqa: BLE001 - any failure means a bad file
+            raise ResourceError(f"ffmpeg did not write a readable MP4 ({exc}); nothing was written") from None
+        if got != sent:
+            raise ResourceError(f"ffmpeg wrote {got} of {sent} frames; nothing was written")
         with open(tmp, "rb") as src:
             shutil.copyfileobj(src, fh, 1 << 20)
     finally:
