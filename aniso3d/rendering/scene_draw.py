@@ -249,11 +249,13 @@ class _InstancedPipe:
                 s = self.up.scene
                 buf = ctx.buffer(instance_data(s.transforms[plan.asset][sel], s.tints[plan.asset][sel],
                                                self.up.origin, h.origin))  # fmt: skip
-                vao = _splat_vao(self._pipe.gl, h, prog, buf)
                 try:
-                    vao.render(moderngl.POINTS, vertices=last - first, first=first, instances=len(sel))
+                    vao = _splat_vao(self._pipe.gl, h, prog, buf)
+                    try:
+                        vao.render(moderngl.POINTS, vertices=last - first, first=first, instances=len(sel))
+                    finally:
+                        vao.release()
                 finally:
-                    vao.release()
                     buf.release()
                 if sprite and kind in ("geometry", "visibility"):
                     self.drawn += (last - first) * len(sel)

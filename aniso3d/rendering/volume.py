@@ -1099,11 +1099,13 @@ class VolumeRenderer:
         buf = ctx.buffer(rows.tobytes())
         fmt = " ".join(f"{k}f" if f"in_{name}" in prog else f"{4 * k}x" for name, k in INSTANCE_FIELDS) + "/i"
         names = [f"in_{name}" for name, _ in INSTANCE_FIELDS if f"in_{name}" in prog]
-        vao = ctx.vertex_array(prog, [(buf, fmt, *names)])
         try:
-            vao.render(moderngl.TRIANGLES, vertices=6, instances=len(rows))
+            vao = ctx.vertex_array(prog, [(buf, fmt, *names)])
+            try:
+                vao.render(moderngl.TRIANGLES, vertices=6, instances=len(rows))
+            finally:
+                vao.release()
         finally:
-            vao.release()
             buf.release()
         return DrawStats(drawn=int(handle.n_voxels) * len(rows), unit="voxels")
 
