@@ -86,11 +86,11 @@ class ViewCone:
 
     @classmethod
     def of(cls, camera: Camera, size: tuple[int, int], near: float | None = None,
-           far: float | None = None) -> ViewCone:  # fmt: skip
+           far: float | None = None, caller: str = "instance selection") -> ViewCone:  # fmt: skip
         """The cone of ``camera`` for a framebuffer ``size`` (W, H); ``near``
         and ``far`` default to the camera's own, else 0 and no limit."""
         if not isinstance(camera, Camera):
-            raise InputError(f"instance selection needs an aniso3d.Camera, got {type(camera).__name__}")
+            raise InputError(f"{caller} needs an aniso3d.Camera, got {type(camera).__name__}")
         w, h = int(size[0]), int(size[1])
         if w < 1 or h < 1:
             raise InputError(f"image size must be at least 1x1 pixels, got {size}")
@@ -109,6 +109,15 @@ class ViewCone:
             scale=h / (2.0 * ty),
         )  # fmt: skip
 
+    def contains(self, x, y, z, rad) -> np.ndarray:
+        """Which spheres (eye-frame centres x, y, z; radius rad) touch the
+        frustum (the four side planes, near and far). Conservative: a sphere
+        near a frustum corner may pass."""
+        return (
+            (z + rad >= self.near) & (z - rad <= self.far)
+            & (np.abs(x) * self.cx - z * self.sx <= rad) & (np.abs(y) * self.cy - z * self.sy <= rad)
+        )  # fmt: skip
+
     def eye_frame(self, centres: np.ndarray) -> np.ndarray:
         """(N, 3) eye-frame coordinates (x right, y up, z view depth)."""
         c = np.asarray(centres, dtype=np.float64) - self.eye
@@ -119,12 +128,7 @@ def visible_instances(centres: np.ndarray, radii: np.ndarray, cone: ViewCone) ->
     """(N,) bool: which spheres touch the frustum (the four side planes, near
     and far). Conservative: a sphere near a frustum corner may pass."""
     e = cone.eye_frame(centres)
-    x, y, z = e[:, 0], e[:, 1], e[:, 2]
-    r = np.asarray(radii, dtype=np.float64)
-    return (
-        (z + r >= cone.near) & (z - r <= cone.far)
-        & (np.abs(x) * cone.cx - z * cone.sx <= r) & (np.abs(y) * cone.cy - z * cone.sy <= r)
-    )  # fmt: skip
+    return cone.contains(e[:, 0], e[:, 1], e[:, 2], np.asarray(radii, dtype=np.float64))
 
 
 #: Splats: at most this many points per pixel of an instance's projected

@@ -28,6 +28,7 @@ from aniso3d.build.pyramid import as_pyramid
 from aniso3d.errors import InputError
 from aniso3d.grid import ranges
 from aniso3d.rendering.camera import Camera
+from aniso3d.rendering.instances import ViewCone
 
 # ------------------------------------------------------------------- resolution
 
@@ -194,56 +195,13 @@ def select_voxels(
     return Selection(chosen, culled, refined)
 
 
-@dataclass(frozen=True)
-class _Frustum:
-    """A camera's view as the voxel walks use it: eye, world->eye axes, clip
-    depths, the side planes' unit normals in the (lateral, depth) plane, and
-    ``scale`` (pixels = size * scale / depth)."""
-
-    eye: np.ndarray
-    axes: np.ndarray
-    near: float
-    far: float
-    cx: float
-    sx: float
-    cy: float
-    sy: float
-    scale: float
-
-    def contains(self, x, y, z, rad) -> np.ndarray:
-        """Which spheres (eye-frame centres x, y, z; radius rad) touch the view."""
-        return (
-            (z + rad >= self.near) & (z - rad <= self.far)
-            & (np.abs(x) * self.cx - z * self.sx <= rad) & (np.abs(y) * self.cy - z * self.sy <= rad)
-        )  # fmt: skip
-
-
-def _frustum(camera, size, pixel_error, near, far, caller: str) -> _Frustum:
+def _frustum(camera, size, pixel_error, near, far, caller: str) -> ViewCone:
     """Check a selection's arguments and set up its view. ``near``/``far``
     default to the camera's own, else the eye plane and no far limit."""
-    if not isinstance(camera, Camera):
-        raise InputError(f"{caller} needs an aniso3d.Camera, got {type(camera).__name__}")
-    w, h_px = (int(size[0]), int(size[1]))
-    if w < 1 or h_px < 1:
-        raise InputError(f"image size must be at least 1x1 pixels, got {size}")
+    view = ViewCone.of(camera, size, near, far, caller)
     if not (pixel_error > 0 and np.isfinite(pixel_error)):
         raise InputError(f"pixel_error must be a positive number of pixels, got {pixel_error}")
-    near = camera.near if near is None else near
-    far = camera.far if far is None else far
-    right, up, fwd = camera.basis()
-    tan_y = math.tan(math.radians(camera.fov) / 2.0)
-    tan_x = tan_y * w / h_px
-    return _Frustum(
-        eye=np.asarray(camera.position, dtype=np.float64),
-        axes=np.stack([right, up, fwd], axis=1),  # world -> (x, y, z) eye frame
-        near=0.0 if near is None else float(near),
-        far=np.inf if far is None else float(far),
-        cx=1.0 / math.hypot(1.0, tan_x),
-        sx=tan_x / math.hypot(1.0, tan_x),
-        cy=1.0 / math.hypot(1.0, tan_y),
-        sy=tan_y / math.hypot(1.0, tan_y),
-        scale=h_px / (2.0 * tan_y),
-    )
+    return view
 
 
 def _eye_frame(centres, index, h, origin, eye, axes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
