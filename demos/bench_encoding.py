@@ -39,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from aniso3d.bench.outputs import markdown_table, write_between_markers
 from aniso3d.build import scenes
 from aniso3d.build.encoding import DEFAULT_BITS, facet_density
 from aniso3d.build.mesh import Mesh
@@ -139,12 +140,6 @@ def crop(alpha: np.ndarray, margin: int = 8) -> tuple[slice, slice]:
 def direction() -> tuple[float, float, float]:
     a, e = math.radians(AZIMUTH), math.radians(ELEVATION)
     return (math.sin(a) * math.cos(e), math.sin(e), math.cos(a) * math.cos(e))
-
-
-def md_table(head: list[str], rows: list[list[str]]) -> str:
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    lines += ["| " + " | ".join(r) + " |" for r in rows]
-    return "\n".join(lines)
 
 
 def mib(n: float) -> str:
@@ -283,7 +278,7 @@ def main() -> None:
         "PSNR: of the texture as built. F vs D: the density sphere derived from the entries, "
         "`F_v(p) = sum_e A_e |n_e . N_p|`, against the registered one, `sum |D - F| / sum D`.",
         "",
-        md_table(["scene", "triangles", "voxels", "entries", "PLY", "memory", "file", "memory / PLY",
+        markdown_table(["scene", "triangles", "voxels", "entries", "PLY", "memory", "file", "memory / PLY",
                   "file / PLY", "memory / file", "file B / voxel", "volume PSNR dB", "splat PSNR dB",
                   "F vs D %"],
                  size_rows),  # fmt: skip
@@ -292,7 +287,7 @@ def main() -> None:
         "entry; ΔPSNR (dB) of the volume and of the high-quality splats when only that field is "
         "quantised (`all`: every field, i.e. the loaded file). Negative: worse.",
         "",
-        md_table(["scene", "field", "bytes", "B / entry", "Δ volume", "Δ splat"], field_rows),
+        markdown_table(["scene", "field", "bytes", "B / entry", "Δ volume", "Δ splat"], field_rows),
         "",
         f"Worst ΔPSNR of `all` over the scenes: volume {worst['volume']:+.3f} dB, "
         f"splat {worst['splat']:+.3f} dB.",
@@ -301,13 +296,7 @@ def main() -> None:
     block = "\n".join(parts)
     print("\n" + block)
     if args.md:
-        path = Path(args.md)
-        text = path.read_text() if path.exists() else "# Texture encoding\n\n"
-        if BEGIN in text and END in text:
-            text = text[: text.index(BEGIN)] + block + text[text.index(END) + len(END):]
-        else:
-            text = text.rstrip("\n") + "\n\n" + block + "\n"
-        path.write_text(text)
+        path = write_between_markers(args.md, block, BEGIN, END, title="# Texture encoding\n\n")
         print(f"wrote {path}")
 
 

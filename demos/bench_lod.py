@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 import aniso3d
+from aniso3d.bench.outputs import markdown_table, write_between_markers
 from aniso3d.build.pyramid import pyramid
 from aniso3d.metrics import psnr, ssim
 from aniso3d.rendering.camera import Camera
@@ -110,12 +111,6 @@ def gather_upload(ctx, pyr, cam, size, near, far, state: dict) -> tuple[float, i
     tex.write(attrib, viewport=(0, 0, 2 * ATTRIB_PER_ROW, rows))
     ctx.finish()
     return time.perf_counter() - t, n
-
-
-def md_table(head: list[str], rows: list[list[str]]) -> str:
-    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    out += ["| " + " | ".join(r) + " |" for r in rows]
-    return "\n".join(out)
 
 
 def main() -> None:
@@ -285,7 +280,7 @@ def main() -> None:
         "**Pyramid levels** (points: one per entry / adaptive counts; MiB: the texture level "
         "in memory):",
         "",
-        md_table(["level", "res", "voxel edge", "voxels", "points", "adaptive points", "MiB"],
+        markdown_table(["level", "res", "voxel edge", "voxels", "points", "adaptive points", "MiB"],
                  level_rows),  # fmt: skip
         "",
         f"**Single level vs LOD** (camera `Camera.fit(bounds, distance_scale=s)`; frame ms: "
@@ -294,12 +289,12 @@ def main() -> None:
         "tree's projected box + 8 px; last column PSNR over the whole image; volume: the level "
         "drawn and one of its voxels in pixels at the nearest depth):",
         "",
-        md_table(["s", "renderer", "points / level", "per level", "wall ms", "cpu ms",
+        markdown_table(["s", "renderer", "points / level", "per level", "wall ms", "cpu ms",
                   "select ms", "PSNR dB", "SSIM", "PSNR full"], main_rows),  # fmt: skip
         "",
         "**Adaptive point counts vs one point per entry** (points / PSNR dB / SSIM, same box):",
         "",
-        md_table(["s", "single, 1 per entry", "single, adaptive", "LOD, 1 per entry",
+        markdown_table(["s", "single, 1 per entry", "single, adaptive", "LOD, 1 per entry",
                   "LOD, adaptive"], adaptive_rows),  # fmt: skip
         "",
         "**Drawing a per-frame subset** (splats, one point per entry; median of 3; CPU work "
@@ -309,19 +304,13 @@ def main() -> None:
         f"{upload_s['splat LOD']:.2f} s (with building the level point sets), "
         f"single level {upload_s['splat single']:.2f} s (with `to_points`).",
         "",
-        md_table(["s", "points drawn", "A: select + index ms", "B: gather + upload ms"], design),
+        markdown_table(["s", "points drawn", "A: select + index ms", "B: gather + upload ms"], design),
         END,
     ]
     block = "\n".join(parts)
     print("\n" + block)
     if args.md:
-        path = Path(args.md)
-        text = path.read_text() if path.exists() else "# Level of detail\n\n"
-        if BEGIN in text and END in text:
-            text = text[: text.index(BEGIN)] + block + text[text.index(END) + len(END):]
-        else:
-            text = text.rstrip("\n") + "\n\n" + block + "\n"
-        path.write_text(text)
+        path = write_between_markers(args.md, block, BEGIN, END, title="# Level of detail\n\n")
         print(f"wrote {path}")
     if args.images:
         out = Path(args.images)

@@ -40,6 +40,7 @@ import numpy as np
 from aniso3d import metrics
 from aniso3d.bench.cameras import CameraSpec, crop_box
 from aniso3d.bench.corpus import VIEW_FOV, CorpusSettings, corpus_cameras, corpus_cases, view_direction
+from aniso3d.bench.outputs import markdown_table, write_between_markers
 from aniso3d.bench.settings import BASELINE
 from aniso3d.build import scenes
 from aniso3d.build.bounds import surface_sample
@@ -55,11 +56,6 @@ RENDERS = ("volume", "splat-high")
 #: The rule for the default: the mean PSNR change over every scene, camera
 #: and renderer positive, and no row worse by more than this (dB).
 WORST_ALLOWED = 0.1
-
-
-def md_table(head: list[str], rows: list[list[str]]) -> str:
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    return "\n".join(lines + ["| " + " | ".join(r) + " |" for r in rows])
 
 
 def far_camera(mesh, minified: CameraSpec, size: tuple[int, int], factor: float) -> CameraSpec:
@@ -197,17 +193,17 @@ def main() -> None:
         "**The spread in each scene**: area-weighted mean coherence of the entries (1: every entry a flat "
         "patch) and the share of the facet area in entries of coherence below 0.9.",
         "",
-        md_table(["scene", "triangles", "mean coherence", "area below 0.9 %"], coh_rows),
+        markdown_table(["scene", "triangles", "mean coherence", "area below 0.9 %"], coh_rows),
         "",
         "**Per scene**: PSNR (dB) and FLIP without the spread (`off`) and with it (`on`); Δ = on - off "
         "(PSNR: positive is better; FLIP: negative is better). Voxel px: a voxel's width in pixels.",
         "",
-        md_table(["scene", "camera", "voxel px", "renderer", "PSNR off", "PSNR on", "Δ PSNR",
+        markdown_table(["scene", "camera", "voxel px", "renderer", "PSNR off", "PSNR on", "Δ PSNR",
                   "FLIP off", "FLIP on", "Δ FLIP"], table),  # fmt: skip
         "",
         "**Over the corpus** (ΔPSNR in dB over the scenes: mean, median, worst, best; mean ΔFLIP):",
         "",
-        md_table(["camera", "renderer", "mean", "median", "worst", "best", "mean Δ FLIP"], summary),
+        markdown_table(["camera", "renderer", "mean", "median", "worst", "best", "mean Δ FLIP"], summary),
         "",
         f"Mean ΔPSNR over every scene, camera and renderer {mean_d:+.3f} dB, worst {worst:+.3f} dB: by the "
         f"rule (mean positive, no row below -{WORST_ALLOWED} dB) the spread "
@@ -217,13 +213,7 @@ def main() -> None:
     block = "\n".join(parts)
     print("\n" + block)
     if args.md:
-        path = Path(args.md)
-        text = path.read_text() if path.exists() else "# Shading the normals' spread\n\n"
-        if BEGIN in text and END in text:
-            text = text[: text.index(BEGIN)] + block + text[text.index(END) + len(END):]
-        else:
-            text = text.rstrip("\n") + "\n\n" + block + "\n"
-        path.write_text(text)
+        path = write_between_markers(args.md, block, BEGIN, END, title="# Shading the normals' spread\n\n")
         print(f"wrote {path}")
 
 

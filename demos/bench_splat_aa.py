@@ -61,6 +61,7 @@ import numpy as np
 
 import aniso3d
 from aniso3d.bench.cameras import crop_box
+from aniso3d.bench.outputs import markdown_table
 from aniso3d.metrics import flip, flip_available, psnr, ssim
 from aniso3d.rendering.camera import Camera
 from aniso3d.rendering.images import save_png
@@ -88,12 +89,6 @@ CONFIGS = (
 def direction() -> tuple[float, float, float]:
     a, e = math.radians(AZIMUTH), math.radians(ELEVATION)
     return (math.sin(a) * math.cos(e), math.sin(e), math.cos(a) * math.cos(e))
-
-
-def md_table(head: list[str], rows: list[list[str]]) -> str:
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    lines += ["| " + " | ".join(r) + " |" for r in rows]
-    return "\n".join(lines)
 
 
 def frame_time(args) -> None:
@@ -310,7 +305,7 @@ def main() -> None:
         f"{args.frames} after a warm-up, interleaved, draw + read back (LOD: with the "
         f"selection). {busy}",
         "",
-        md_table(head, rows),
+        markdown_table(head, rows),
     ]
     if len(minified) > len(configs) or (several and minified):
         parts += [
@@ -318,7 +313,7 @@ def main() -> None:
             f"**Mean over the {len(minified) // max(len(mean_rows), 1)} cameras where a voxel covers a pixel "
             f"or less**:",
             "",
-            md_table(["renderer", "PSNR dB", "SSIM", "FLIP", "coverage", "wall ms", "cpu ms"], mean_rows),
+            markdown_table(["renderer", "PSNR dB", "SSIM", "FLIP", "coverage", "wall ms", "cpu ms"], mean_rows),
         ]
     parts.append(end)
     block = "\n".join(parts)

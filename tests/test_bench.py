@@ -376,3 +376,17 @@ def test_frame_filling_camera_matches_camera_frame():
     cams = bench.make_cameras(bounds, bench.PRESETS["quick"])
     ref = Camera.frame(bounds)
     assert cams[0].camera == ref
+
+
+def test_write_between_markers_keeps_the_prose(tmp_path):
+    from aniso3d.bench.outputs import markdown_table, write_between_markers
+
+    block = "<!-- b -->\n" + markdown_table(["a", "b"], [["1", "2"]]) + "\n<!-- e -->"
+    new = write_between_markers(tmp_path / "new.md", block, "<!-- b -->", "<!-- e -->", title="# T\n\n")
+    assert new.read_text() == "# T\n\n" + block + "\n"
+    page = tmp_path / "page.md"
+    page.write_text("intro\n<!-- b -->\nold table\n<!-- e -->\noutro\n")
+    write_between_markers(page, block, "<!-- b -->", "<!-- e -->")
+    assert page.read_text() == "intro\n" + block + "\noutro\n"
+    assert "| a | b |\n|---|---|\n| 1 | 2 |" in block
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []

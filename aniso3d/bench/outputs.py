@@ -7,6 +7,7 @@ import csv
 import io
 import json
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -98,3 +99,23 @@ def write_outputs(
             made.append(name)
     put("report.md", make_report(result, made, notes).encode("utf-8"))
     return written, notes
+
+
+def markdown_table(head: list[str], rows: list[list[str]]) -> str:
+    """A Markdown table of the already formatted cells ``rows`` under ``head``."""
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    return "\n".join(lines + ["| " + " | ".join(r) + " |" for r in rows])
+
+
+def write_between_markers(path: str | os.PathLike, block: str, begin: str, end: str, title: str = "") -> Path:
+    """Put ``block`` (which starts with ``begin`` and ends with ``end``) into
+    the Markdown file ``path`` in place of the text between those markers, so
+    the prose around a generated table is kept; a file without them gets the
+    block appended, a missing file ``title`` and the block. Written atomically."""
+    p = Path(path)
+    text = p.read_text() if p.exists() else title
+    if begin in text and end in text:
+        text = text[: text.index(begin)] + block + text[text.index(end) + len(end):]
+    else:
+        text = text.rstrip("\n") + "\n\n" + block + "\n"
+    return atomic_write(p, text.encode())
