@@ -133,6 +133,7 @@ def check_output(out: Path):
 
 def write_report(rows, errors, load, args: ForestSettings, out: Path, command: str) -> Path:
     """forest.md and forest.png (matplotlib, the ``plots`` extra) into ``out``, atomically; the page's path."""
+    code = _code()  # before this writes its own files into a checkout
     matplotlib = check_output(out)
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -158,7 +159,7 @@ def write_report(rows, errors, load, args: ForestSettings, out: Path, command: s
     lines = [
         "# A forest of instances: frame time against the number of trees",
         "",
-        f"`{command}` on llvmpipe, {time.strftime('%Y-%m-%d %H:%M')}, code at {_code()}. "
+        f"`{command}` on llvmpipe, {time.strftime('%Y-%m-%d %H:%M')}, code at {code}. "
         f"Load average (1 min) during the run: "
         f"{min(load):.1f}-{max(load):.1f}.",
         "",
