@@ -278,6 +278,43 @@ def test_point_cloud_file_is_not_a_mesh(tmp_path):
         load_mesh(tmp_path / "pts.ply")
 
 
+@pytest.mark.parametrize("suffix, module", [(".3mf", "networkx"), (".dae", "collada")])
+def test_3mf_and_collada_read_with_the_formats_extra(tmp_path, suffix, module):
+    """3MF and COLLADA need trimesh's optional readers ('aniso3d[formats]')."""
+    pytest.importorskip(module)
+    import trimesh
+
+    box = trimesh.creation.box(extents=(1.0, 2.0, 3.0))
+    box.export(tmp_path / f"box{suffix}")
+    mesh = load_mesh(tmp_path / f"box{suffix}")
+    assert len(mesh.faces) == 12
+    assert mesh.area() == pytest.approx(2 * (1 * 2 + 2 * 3 + 1 * 3), rel=1e-6)
+    np.testing.assert_allclose(mesh.bounds, [[-0.5, -1.0, -1.5], [0.5, 1.0, 1.5]], atol=1e-6)
+
+
+@pytest.mark.parametrize(
+    "raised, module",
+    [
+        (ModuleNotFoundError("No module named 'networkx'"), "networkx"),  # trimesh drops .name
+        (ModuleNotFoundError("No module named 'lxml'", name="lxml"), "lxml"),
+        (ImportError("missing `pip install pycollada`"), "pycollada"),
+    ],
+)
+def test_a_missing_optional_reader_is_named_with_the_way_out(tmp_path, monkeypatch, raised, module):
+    import trimesh
+
+    def load(*args, **kwargs):
+        raise raised
+
+    monkeypatch.setattr(trimesh, "load", load)
+    (tmp_path / "part.3mf").write_bytes(b"PK\x03\x04")
+    with pytest.raises(InputError) as info:
+        load_mesh(tmp_path / "part.3mf")
+    text = str(info.value)
+    assert f"'{module}'" in text and "aniso3d[formats]" in text and "part.3mf" in text
+    assert "'?'" not in text
+
+
 # ---------------------------------------------------------------------- scenes
 
 

@@ -396,6 +396,8 @@ def _stack(strips: list[np.ndarray], titles: list[str], note: str = "", gap: int
     title, and a ``note`` line at the foot."""
     from PIL import Image, ImageDraw, ImageFont
 
+    from aniso3d.rendering.images import wrap_text
+
     h = max(s.shape[0] for s in strips)
     font_px = max(12, h // 24)
     try:
@@ -407,19 +409,26 @@ def _stack(strips: list[np.ndarray], titles: list[str], note: str = "", gap: int
             font = ImageFont.load_default(size=font_px)
         except TypeError:  # Pillow < 10.1 has one bitmap size
             font = ImageFont.load_default()
-    title_h = int(font_px * 1.4) + gap
     w = max(s.shape[1] for s in strips)
-    foot = title_h if note else 0
-    canvas = Image.new("RGB", (w, sum(s.shape[0] + title_h for s in strips) + foot), (255, 255, 255))
+    small = font.font_variant(size=max(10, font_px * 3 // 4)) if hasattr(font, "font_variant") else font
+    measure = ImageDraw.Draw(Image.new("RGB", (1, 1)))
+    titles = [wrap_text(measure, t, font, w - 2 * gap) for t in titles]
+    note = wrap_text(measure, note, small, w - 2 * gap) if note else ""
+
+    def height(text: str, px: int) -> int:
+        return int((text.count("\n") + 1) * px * 1.3) + gap
+
+    foot = height(note, max(10, font_px * 3 // 4)) if note else 0
+    title_hs = [height(t, font_px) + gap // 2 for t in titles]
+    canvas = Image.new("RGB", (w, sum(s.shape[0] for s in strips) + sum(title_hs) + foot), (255, 255, 255))
     draw = ImageDraw.Draw(canvas)
     y = 0
-    for strip, title in zip(strips, titles, strict=True):
-        draw.text((gap, y + gap), title, fill=(0, 0, 0), font=font)
+    for strip, title, title_h in zip(strips, titles, title_hs, strict=True):
+        draw.multiline_text((gap, y + gap), title, fill=(0, 0, 0), font=font, spacing=4)
         canvas.paste(Image.fromarray(np.ascontiguousarray(strip)), (0, y + title_h))
         y += title_h + strip.shape[0]
     if note:
-        draw.text((gap, y), note, fill=(90, 90, 90), font=font.font_variant(size=max(10, font_px * 3 // 4))
-                  if hasattr(font, "font_variant") else font)  # fmt: skip
+        draw.multiline_text((gap, y), note, fill=(90, 90, 90), font=small, spacing=3)
     return np.asarray(canvas)
 
 

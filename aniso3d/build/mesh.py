@@ -10,6 +10,7 @@ the per-face diffuse reflectance ``kd``.
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -183,6 +184,20 @@ def concatenate(meshes: list[Mesh], name: str = "mesh") -> Mesh:
 MESH_SUFFIXES = {".obj", ".ply", ".stl", ".glb", ".gltf", ".off", ".dae", ".3mf"}
 
 
+def _missing_module(exc: ImportError) -> str:
+    """The module an ImportError says is missing: trimesh re-raises them
+    without ``name`` ("No module named 'networkx'", "missing `pip install
+    pycollada`")."""
+    if exc.name:
+        return exc.name
+    text = str(exc)
+    for pattern in (r"No module named '([\w.]+)'", r"pip install ([\w.-]+)"):
+        m = re.search(pattern, text)
+        if m:
+            return m.group(1)
+    return text.strip() or "unknown"
+
+
 def check_readable_file(path: str | os.PathLike, what: str = "input") -> Path:
     """Return ``path`` as a Path if it is a readable, non-empty regular file."""
     p = Path(path)
@@ -220,12 +235,12 @@ def load_mesh(path: str | os.PathLike, name: str | None = None) -> Mesh:
         _check_binary_stl_size(p)
     try:
         scene = trimesh.load(str(p), force="scene", process=False)
-    except ModuleNotFoundError as exc:  # an optional loader, or a fallback for bad data
-        name = exc.name or "?"
+    except ImportError as exc:  # an optional reader (3MF, COLLADA), or a fallback for bad data
+        name = _missing_module(exc)
         raise InputError(
-            f"could not read mesh '{p}': trimesh needs the optional module '{name}' for it. If it "
-            f"is a valid {suffix} file, install that (pip install {name.replace('_', '-')}); else "
-            "the file is damaged or not in the format its suffix says"
+            f"could not read mesh '{p}': reading {suffix} files needs the optional module '{name}'. "
+            f"Install the optional readers with: pip install 'aniso3d[formats]'. If '{name}' is "
+            "installed, the file is damaged or not in the format its suffix says"
         ) from None
     except Exception as exc:  # trimesh raises many types for damaged files
         raise InputError(

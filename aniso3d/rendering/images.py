@@ -36,8 +36,27 @@ def load_png(path: str | os.PathLike) -> np.ndarray:
         return np.asarray(im.convert("RGB"))
 
 
+def wrap_text(draw, text: str, font, width: float) -> str:
+    """``text`` with each of its lines broken between words so that none is
+    wider than ``width`` pixels in ``font`` (a word wider than that stays
+    whole): captions of small panels must not run into their neighbours."""
+    out: list[str] = []
+    for line in text.split("\n"):
+        words, cur = line.split(" "), ""
+        for word in words:
+            trial = f"{cur} {word}" if cur else word
+            if cur and draw.textlength(trial, font=font) > width:
+                out.append(cur)
+                cur = word
+            else:
+                cur = trial
+        out.append(cur)
+    return "\n".join(out)
+
+
 def label_panels(panels: list[np.ndarray], labels: list[str], gap: int = 8) -> np.ndarray:
-    """Panels of equal height side by side on white, each captioned below."""
+    """Panels of equal height side by side on white, each captioned below
+    (captions wrapped to their panel's width)."""
     from PIL import Image, ImageDraw, ImageFont
 
     h = max(p.shape[0] for p in panels)
@@ -46,6 +65,8 @@ def label_panels(panels: list[np.ndarray], labels: list[str], gap: int = 8) -> n
         font = ImageFont.load_default(size=font_px)
     except TypeError:  # Pillow < 10.1 has one bitmap size
         font = ImageFont.load_default()
+    measure = ImageDraw.Draw(Image.new("RGB", (1, 1)))
+    labels = [wrap_text(measure, label, font, p.shape[1] - 4) for p, label in zip(panels, labels, strict=True)]
     lines = max(label.count("\n") + 1 for label in labels)
     caption = int(lines * font_px * 1.35) + gap
     w = sum(p.shape[1] for p in panels) + gap * (len(panels) + 1)
