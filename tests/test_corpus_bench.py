@@ -267,6 +267,29 @@ def test_corpus_command_line(gl_available, tmp_path, capsys):
     assert list(csv.DictReader(io.StringIO((out / "corpus_bench.csv").read_text())))[0]["scene"] == "room"
 
 
+@pytest.mark.gpu
+def test_corpus_of_your_own_meshes_skips_the_unreadable_ones(gl_available, tmp_path, capsys):
+    """--meshes FOLDER: every mesh file in it measured like a corpus scene,
+    a broken file skipped with its reason, the command repeated in the report."""
+    own = tmp_path / "own"
+    own.mkdir()
+    scenes.blob(subdivisions=2).to_trimesh().export(own / "lump.ply")
+    scenes.quad().to_trimesh().export(own / "card.obj")
+    (own / "broken.stl").write_bytes(b"solid nothing\n")
+    (own / "notes.txt").write_text("not a mesh")
+    out = tmp_path / "bench"
+    argv = ["bench", "--corpus", "--quick", "--size", "64", "--frames", "1", "--turntable", "3",
+            "--meshes", str(own), "-q", "-o", str(out)]  # fmt: skip
+    assert cli.main(argv) == 0
+    captured = capsys.readouterr()
+    assert f"skipped {own / 'broken.stl'}" in captured.err and "notes.txt" not in captured.err
+    assert "card: minified_vs_2x2=" in captured.out and "lump: minified_vs_2x2=" in captured.out
+    md = (out / "corpus_bench.md").read_text()
+    assert f"--meshes {own} -o {out}`" in md
+    assert [t["scene"] for t in csv.DictReader(io.StringIO((out / "corpus_bench.csv").read_text()))] == [
+        "card", "lump"]  # fmt: skip
+
+
 @pytest.mark.parametrize(
     "argv, message",
     [
@@ -274,6 +297,8 @@ def test_corpus_command_line(gl_available, tmp_path, capsys):
         (["scene:tree", "--corpus"], "built-in scenes"),
         (["--corpus", "--scenes", "room,teapot"], "unknown corpus scene"),
         (["--scenes", "room"], "add --corpus"),
+        (["--meshes", "a.obj"], "add --corpus"),
+        (["--corpus", "--meshes", "/no/such/folder"], "does not exist"),
     ],
 )
 def test_corpus_command_line_refuses(argv, message, tmp_path, capsys):

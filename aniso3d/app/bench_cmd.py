@@ -11,6 +11,7 @@ nothing of the command line.
 from __future__ import annotations
 
 import argparse
+import itertools
 import shlex
 import sys
 from pathlib import Path
@@ -49,6 +50,9 @@ def register(subparsers) -> None:
                              ".csv and .json into OUTDIR (512x512; --quick: 256x256, few frames)")
     corpus.add_argument("--scenes", type=_scene_list, default=None, metavar="A,B",
                         help="corpus scenes to run (default: all of them)")
+    corpus.add_argument("--meshes", type=_path_list, default=None, metavar="PATH,PATH",
+                        help="your own meshes, measured like the corpus scenes: files, or folders whose mesh "
+                             "files are all taken (instead of the built-in scenes, unless --scenes names some)")
     corpus.add_argument("--turntable", type=positive_int, default=None, metavar="N",
                         help="turntable frames for the flicker measurement (default: the preset's)")
     p.set_defaults(func=cmd_bench)
@@ -187,6 +191,51 @@ def _scene_list(text: str) -> tuple[str, ...]:
     return names
 
 
+def _path_list(text: str) -> tuple[str, ...]:
+    paths = tuple(n.strip() for n in text.split(",") if n.strip())
+    if not paths:
+        raise argparse.ArgumentTypeError(f"expected mesh files or folders separated by commas, got '{text}'")
+    return paths
+
+
+def mesh_files(paths: tuple[str, ...]) -> list[Path]:
+    """The mesh files ``--meshes`` names: files as given, folders' mesh files
+    (by suffix) in name order. A path that does not exist is an error."""
+    from aniso3d.build.mesh import MESH_SUFFIXES
+
+    files: list[Path] = []
+    for text in paths:
+        p = Path(text)
+        if p.is_dir():
+            found = sorted(f for f in p.iterdir() if f.is_file() and f.suffix.lower() in MESH_SUFFIXES)
+            if not found:
+                raise InputError(f"folder '{p}' holds no mesh files ({', '.join(sorted(MESH_SUFFIXES))})")
+            files += found
+        elif p.exists():
+            files.append(p)
+        else:
+            raise InputError(f"--meshes: '{p}' does not exist; check the path")
+    return files
+
+
+def readable_meshes(files: list[Path], say=print):
+    """(name, mesh) for each file, read when the run reaches it; a file that
+    cannot be read is skipped with its one-line reason (a sweep over someone
+    else's folder must not stop at its first broken file)."""
+    from aniso3d.build.mesh import load_mesh
+
+    names: dict[str, int] = {}
+    for f in files:
+        try:
+            mesh = load_mesh(f)
+        except InputError as exc:
+            say(f"skipped {f}: {exc}")
+            continue
+        k = names.get(f.stem, 0)
+        names[f.stem] = k + 1
+        yield (f.stem if k == 0 else f"{f.stem}~{k}"), mesh
+
+
 def corpus_command(args: argparse.Namespace) -> str:
     """The one command line that repeats this corpus run (printed atop its report)."""
     parts = ["aniso3d", "bench", "--corpus"]
@@ -200,6 +249,8 @@ def corpus_command(args: argparse.Namespace) -> str:
             parts += [flag, str(value)]
     if args.scenes:
         parts += ["--scenes", ",".join(args.scenes)]
+    if args.meshes:
+        parts += ["--meshes", ",".join(args.meshes)]
     if args.no_flip:
         parts.append("--no-flip")
     if args.backend != "auto":
@@ -220,9 +271,17 @@ def cmd_corpus(args: argparse.Namespace) -> int:
     outdir = Path(args.output)
     if outdir.exists() and not outdir.is_dir():
         raise InputError(f"output '{outdir}' is a file; the corpus bench writes into a folder")
+    pairs, n_meshes = None, None
+    if args.meshes:
+        from aniso3d.build import scenes
+
+        files = mesh_files(args.meshes)
+        own = readable_meshes(files, say=lambda text: print(text, file=sys.stderr))
+        pairs = itertools.chain(scenes.corpus(args.scenes) if args.scenes else (), own)
+        n_meshes = len(args.scenes or ()) + len(files)
     progress = Progress(f"corpus {settings.name}", enabled=False if args.quiet else None)
-    result = run_corpus(settings, progress=progress, with_flip=False if args.no_flip else None,
-                        backend=args.backend)
+    result = run_corpus(settings, meshes=pairs, progress=progress, with_flip=False if args.no_flip else None,
+                        backend=args.backend, n_meshes=n_meshes)
     for path in write_corpus(result, outdir, corpus_command(args)):
         print(f"wrote {path}")
     for s in result.scenes:
@@ -239,8 +298,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
     if args.corpus:
         return cmd_corpus(args)
-    if args.scenes or args.turntable:
-        raise InputError("--scenes and --turntable apply to the corpus bench; add --corpus")
+    if args.scenes or args.turntable or args.meshes:
+        raise InputError("--scenes, --meshes and --turntable apply to the corpus bench; add --corpus")
     preset = "smoke" if args.smoke else "quick" if args.quick else "full"
     settings = preset_settings(preset, size=args.size, frames=args.frames, gt_ssaa=args.gt_ssaa)
     outdir = Path(args.output)

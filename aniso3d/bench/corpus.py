@@ -446,9 +446,12 @@ def run_corpus(
     progress: Progress | None = None,
     with_flip: bool | None = None,
     backend: str = "auto",
+    n_meshes: int | None = None,
 ) -> CorpusResult:
     """Measure every scene of ``settings.scenes`` (or the given (name, mesh)
-    pairs, e.g. small versions for a test), one at a time on one GL context.
+    pairs, e.g. small versions for a test or a user's files, read as the run
+    reaches them when ``n_meshes`` says how many to expect), one at a time on
+    one GL context.
 
     ``progress(fraction, stage)`` is called after each step; ``with_flip``
     None computes FLIP when its package is installed.
@@ -458,6 +461,8 @@ def run_corpus(
     if meshes is None:  # built one at a time as the run reaches them
         pairs: Iterable[tuple[str, Mesh]] = scenes.corpus(settings.scenes)
         n_scenes = len(settings.scenes)
+    elif n_meshes is not None:
+        pairs, n_scenes = meshes, n_meshes
     else:
         pairs = list(meshes)
         n_scenes = len(pairs)
