@@ -19,7 +19,10 @@
 // exponential / 1 linear / 2 split / 3 planar; u_pixel_angle the angle a
 // pixel spans (radians, 2 tan(fov/2) / height) and u_sheet_pixels the voxel
 // sizes in pixels over which every sheet fades in (render/volume.py:
-// sheet_share); u_background RGB; the lighting uniforms of lighting.glsl.
+// sheet_share); u_edge_filter 1 to count the share of the pixel's footprint
+// that crosses each sheet, 0 to count the centre ray's crossing alone
+// (render/volume.py:crossing_fraction); u_background RGB; the lighting
+// uniforms of lighting.glsl.
 // In (laid out by aniso3d/rendering/volume.py:pack_volume; 2D textures t_top ...
 // t_dirs, TEX_WIDTH texels a row, or with PLAIN_MARCH the same arrays as SSBOs):
 //   0 top[]      int, brick id of each brick cell or -1 (x fastest)
@@ -52,7 +55,9 @@ vec3 g_light_dir[4];
 
 // Injected by render/volume.py: BRICK (brick edge in voxels), ALPHA_MAX
 // (coverage cap below 1 so the optical depth stays finite), T_MIN (early
-// termination; T_MIN_PLAIN in the plain marching), BIG (stands for an infinite ray parameter).
+// termination; T_MIN_PLAIN in the plain marching), BIG (stands for an
+// infinite ray parameter), RUN_SHARE, RUN_GAP and RUN_PARALLEL (the runs
+// of surface sheets: render/volume.py:sheet_terms).
 
 uniform vec2 u_size;
 uniform vec3 u_forward;
@@ -73,6 +78,7 @@ uniform int u_normal_mode;
 uniform int u_opacity_mode;
 uniform float u_pixel_angle;
 uniform vec2 u_sheet_pixels;
+uniform float u_edge_filter;
 uniform vec3 u_background;
 #ifdef INSTANCED
 flat in vec3 v_forward;
@@ -152,6 +158,57 @@ float g_trans_f;   // split: the clouds' transmittance so far
 float g_dist0;     // distance (grid units) from the eye to the ray's origin o
 float g_t50;       // ray parameter (grid units, from o) where 1 - T reached 0.5
 bool g_has50;      // whether it did (t can be negative: o may lie past near)
+// planar, edges filtered: a run of voxels holding surface sheets (entries
+// whose static share is whole: sheets at every scale) near the ray, a few
+// voxels long: one surface cut by voxel faces, or a silhouette's near and far
+// sides. Its sheets are composited together when it closes (close_run()).
+bool g_run;        // a run is open
+vec3 g_run_ref;    // the unit normal of its first sheet
+float g_run_end;   // ray parameter where its last voxel ends
+vec2 g_run_band;   // share of the footprint crossing its sheets, on each side
+vec2 g_run_hit;    // fills of the sheets the centre ray crosses, on each side
+vec3 g_run_col;    // its sheets' shaded colours, weighted by what they count
+float g_run_w;     // ... the weights' sum
+float g_run_tw;    // ... and the weighted crossing parameter (from o)
+
+// Share in [0, 1] of a pixel's footprint, offsets o in [-half_w, half_w]
+// along the sheet's normal from the centre ray, whose rays cross the sheet's
+// plane inside the ray's stretch of the voxel: o in [lo, hi]. A point sample
+// (half_w 0) is 1 or 0. Mirrors render/volume.py:crossing_fraction.
+float crossing_fraction(float lo, float hi, float half_w) {
+    if (half_w <= 1e-7) return (lo <= 0.0 && hi >= 0.0) ? 1.0 : 0.0;
+    return clamp((min(hi, half_w) - max(lo, -half_w)) / (2.0 * half_w), 0.0, 1.0);
+}
+
+// The open run's coverage. Its sheets lie on the side where the ray met
+// the first one (entering a surface) or on the side turned back (leaving
+// it, as at a silhouette's far side). Where the centre ray crosses sheets on
+// one side only (a surface cut by voxel faces, a corner), their fills,
+// whole; elsewhere (a near miss, or through both sides of a silhouette) the
+// share of the footprint's rays that cross the side they cross most.
+// Mirrors render/volume.py:run_coverage. close_run() composites the open
+// run as one layer, its colour and depth those of its sheets each weighted
+// by what it counts times what the run had left uncovered before its voxel
+// (the front-most surface's), and closes it.
+float run_coverage() {
+    float cov = max(g_run_band.x, g_run_band.y);
+    if ((g_run_hit.x > 0.0) != (g_run_hit.y > 0.0)) cov = max(cov, max(g_run_hit.x, g_run_hit.y));
+    return clamp(cov, 0.0, 1.0);
+}
+
+void close_run() {
+    if (!g_run) return;
+    g_run = false;
+    float cov = run_coverage();
+    if (!(cov > 0.0) || !(g_run_w > 0.0)) return;
+    float seg = g_trans * cov;
+    if (!g_has50 && g_trans > 0.5 && g_trans - seg <= 0.5) {
+        g_t50 = g_run_tw / g_run_w;
+        g_has50 = true;
+    }
+    g_color += seg * (g_run_col / g_run_w);
+    g_trans -= seg;
+}
 
 // The 4 samples nearest the line of w (density is even: D(w) = D(-w), so a
 // sample N_p also stands at -N_p) and Franke-Little weights
@@ -194,6 +251,14 @@ void neighbours(vec3 w) {
 // Add voxel v, crossed over ray parameters [t0, t0 + chord] (grid units)
 // from the voxel-local point x_in (the voxel is the unit cube).
 void composite(int v, vec3 x_in, float t0, float chord) {
+    if (g_run && t0 > g_run_end + RUN_GAP) {
+        close_run();
+#ifdef PLAIN_MARCH
+        if (g_trans <= T_MIN_PLAIN) return;
+#else
+        if (g_trans <= T_MIN) return;
+#endif
+    }
     uint e0 = OFFS(v);
     uint e1 = OFFS(v + 1);
     float base_w = 0.0;        // sum A |n . w|: the facets' own projected area
@@ -208,6 +273,9 @@ void composite(int v, vec3 x_in, float t0, float chord) {
     // of them where the voxel spans enough pixels.
     float pixels = 1.0 / ((g_dist0 + t0 + 0.5 * chord) * u_pixel_angle);
     float zoom = clamp((pixels - u_sheet_pixels.x) / max(u_sheet_pixels.y - u_sheet_pixels.x, 1e-9), 0.0, 1.0);
+    float foot = u_edge_filter / pixels;  // the pixel's footprint, voxel units
+    bool in_run = false;       // planar: the voxel holds surface sheets near the ray
+    float run_open = 1.0;      // ... and what the run left uncovered before it
     float sheet_proj = 0.0;    // sum A_s |n . w|: the sheets' projected area
     float crossed = 0.0;       // planar: fills of the sheets crossed; split: sheet_proj
     float t_cross = 0.0;       // planar: fill-weighted crossing parameter from t0
@@ -252,9 +320,51 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                 float s_in = dot(nh, x_in) - uintBitsToFloat(sh.x);
                 float s_out = s_in + nw * chord;
                 float slack = uintBitsToFloat(sh.w);
-                if (min(s_in, s_out) <= slack && max(s_in, s_out) >= -slack) {
+                float lo = -max(s_in, s_out) - slack;
+                float hi = -min(s_in, s_out) + slack;
+                bool hit = lo <= 0.0 && hi >= 0.0;
+                float th = clamp(nw != 0.0 ? -s_in / nw : 0.0, 0.0, chord);
+                if (foot > 0.0 && fill_share.y >= RUN_SHARE) {
+                    // A surface sheet: to the run. The footprint's rays,
+                    // offset along the normal by up to half its width there,
+                    // cross inside the voxel where the offset is in [lo, hi].
+                    float half_w = 0.5 * foot * sqrt(max(1.0 - nw * nw, 0.0));
+                    // (Without the slack: it only keeps a centre ray from
+                    // slipping between neighbouring planes.)
+                    float band = fill * crossing_fraction(lo + slack, hi - slack, half_w);
+                    float counted = hit ? fill : band;
+                    if (counted > 0.0) {
+                        if (!in_run) {
+                            run_open = g_run ? 1.0 - run_coverage() : 1.0;
+                            if (!g_run) {
+                                g_run = true;
+                                g_run_ref = nh;
+                                g_run_band = vec2(0.0);
+                                g_run_hit = vec2(0.0);
+                                g_run_col = vec3(0.0);
+                                g_run_w = 0.0;
+                                g_run_tw = 0.0;
+                            }
+                            g_run_end = t0 + chord;
+                            in_run = true;
+                        }
+                        // The side: for a sheet near parallel to the run's
+                        // first, whether the ray meets it as it met that one
+                        // or turned back (whatever the facets' winding); one
+                        // across it (a corner, a box's edge) stays on the
+                        // first side.
+                        float along = dot(nh, g_run_ref);
+                        float same = abs(along) >= RUN_PARALLEL ? nw * dot(g_run_ref, g_d) * along : 1.0;
+                        int side = same >= 0.0 ? 0 : 1;
+                        g_run_band[side] += band;
+                        g_run_hit[side] += hit ? fill : 0.0;
+                        g_run_col += run_open * counted * c;
+                        g_run_w += run_open * counted;
+                        g_run_tw += run_open * counted * (t0 + th);
+                    }
+                } else if (hit) {
                     ws = fill;
-                    t_cross += fill * clamp(nw != 0.0 ? -s_in / nw : 0.0, 0.0, chord);
+                    t_cross += fill * th;
                 }
             }
             sheet_proj += a_s * abs(nw);
@@ -327,8 +437,8 @@ void composite(int v, vec3 x_in, float t0, float chord) {
             } else if (u_opacity_mode == 2) {
                 dt = chord * (g_trans - 0.5) / seg;
             } else {
-                float a_s = min(crossed, 1.0);
                 // The sheets alone take it there, or the cloud with them.
+                float a_s = min(crossed, 1.0);
                 dt = g_trans * (1.0 - a_s) <= 0.5 ? t_cross / crossed : -log(0.5 / g_trans + a_s) / sigma;
             }
         }
@@ -416,6 +526,8 @@ void main() {
     g_trans_f = 1.0;
     g_t50 = 0.0;
     g_has50 = false;
+    g_run = false;
+    g_run_end = 0.0;
 
 #ifdef PLAIN_MARCH
     ivec3 bcell, bstep, cell, stp;
@@ -455,6 +567,7 @@ void main() {
         btmax[a] += btdelta[a];
         if (bcell[a] < 0 || bcell[a] >= u_bricks[a]) break;
     }
+    close_run();
 
 #else
     ivec3 bcell, bstep, cell, stp, lo, vhi;
@@ -480,6 +593,14 @@ void main() {
             if (--budget < 0) {
                 alive = false;
                 break;
+            }
+            if (g_run && (in_brick ? ti : t) > g_run_end + RUN_GAP) {
+                // Past the run: its surface is composited, and may end the ray.
+                close_run();
+                if (g_trans <= T_MIN) {
+                    alive = false;
+                    break;
+                }
             }
             if (!in_brick) {
                 tb_exit = min(min(btmax.x, btmax.y), btmax.z);
@@ -525,6 +646,7 @@ void main() {
         }
         if (v >= 0) composite(v, o + g_d * tv - vec3(vcell), tv, chord);
     }
+    close_run();
     // Stopped early: what is left behind takes the colour seen so far
     // (an opaque surface keeps its own colour, not a trace of the background).
     if (g_trans <= T_MIN) {

@@ -47,19 +47,25 @@ def test_quantised_sheets_are_wider_by_their_share(sphere):
     np.testing.assert_allclose(wide.slack - narrow.slack, volume.SHEET_QUANTISED * wide.share, atol=1e-3)
 
 
+@pytest.mark.parametrize("edges", ["filtered", "sampled"])
 @pytest.mark.parametrize("widen", [True, False])
-def test_a_sphere_loaded_from_its_file_has_no_hole(sphere, monkeypatch, widen):
+def test_a_sphere_loaded_from_its_file_has_no_hole(sphere, monkeypatch, widen, edges):
+    """With the widening, no hole whichever way crossings are counted. Without
+    it, the centre ray alone ("sampled") slips between rounded planes (the
+    check can fail: alpha 2 measured), while the runs of surface sheets
+    ("filtered", the default) count the footprint's crossings and close the
+    hole by themselves (measured min 251)."""
     mesh, tex = sphere
     if not widen:
         monkeypatch.setattr(volume, "SHEET_QUANTISED", 0.0)
     cam = framing_camera(mesh, (SIZE, SIZE))
     with Renderer((SIZE, SIZE)) as r:
         truth = r.render(mesh, cam, "mesh", alpha=True)
-        built = r.render(tex, cam, "volume", alpha=True)
-        stored = r.render(tex.as_stored(), cam, "volume", alpha=True)
+        built = r.render(tex, cam, "volume", alpha=True, edges=edges)
+        stored = r.render(tex.as_stored(), cam, "volume", alpha=True, edges=edges)
     inside = binary_erosion(truth[..., 3] == 255, iterations=3)
     assert built[..., 3][inside].min() >= 245
-    if widen:
+    if widen or edges == "filtered":
         assert stored[..., 3][inside].min() >= 245
-    else:  # the check can fail: without the widening, rays slip through
+    else:
         assert stored[..., 3][inside].min() < 200

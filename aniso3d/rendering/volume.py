@@ -152,6 +152,30 @@ SHEET_FILL = (0.7, 0.95)
 #: Every entry is a sheet in proportion to its voxel's size in pixels: ramp
 #: from 0 at the first value to 1 at the second (see :func:`sheet_share`).
 SHEET_PIXELS = (1.0, 3.0)
+#: How the "planar" law counts the crossings of surface sheets (entries whose
+#: static share is whole, :data:`RUN_SHARE`): "filtered" (default) counts
+#: them run by run over the pixel's footprint (:func:`run_coverage`), so
+#: silhouettes are anti-aliased as a box-filtered pixel sees them; "sampled"
+#: counts the centre ray's crossing alone, all or nothing, in its voxel (the
+#: first version).
+EDGE_MODES = ("filtered", "sampled")
+#: A sheet is a surface sheet, counted in runs, when its static share
+#: (:attr:`EntrySheets.share`) is at least this: it fills its plane's section
+#: of the voxel (or its voxel's facets together do) and continues into the
+#: neighbours. Partial sheets (leaves, edges) keep the per-voxel count.
+RUN_SHARE = 0.999
+#: A run closes when the ray has gone this far (grid units) past its last
+#: voxel: a surface cut by voxel faces, or a silhouette's near and far sides,
+#: lie in voxels a cell's diagonal apart at most along the ray.
+RUN_GAP = 1.0
+#: The side of a surface sheet in a run: whether the ray meets it as it
+#: meets the run's first sheet or turned back. For a sheet whose normal is
+#: within 60 degrees of the first's, or of its opposite (|cos| at least
+#: this), the side is ``sign((n . w)(n . n_0)(n_0 . w))``, the same for a
+#: sheet and its flipped twin (a mesh's winding does not matter), opposite
+#: for the near and far sides of a silhouette; one across it (the two faces
+#: of a corner or of a box's edge) is on the first side.
+RUN_PARALLEL = 0.5
 #: uint32 words per shading entry on the GPU (three uvec4; see volume.frag).
 ENTRY_WORDS = 12
 #: Width in texels of the 2D textures the arrays of :func:`pack_volume` are
@@ -446,7 +470,15 @@ class SheetTerms:
       crossings, from the voxel's entry (grid units);
     - ``sheet_color`` and ``cloud_color``: the entries' shaded colours weighted
       by what each adds to the sheet part and by its cloud area ``(A - A_s)
-      |n . w|``.
+      |n . w|``;
+    - ``run``: "planar" with ``edges="filtered"``: the surface sheets
+      (:data:`RUN_SHARE`) that count for the ray's runs, one row each, in
+      voxel order (these are not in ``crossed``): ``voxel`` (its index in
+      ``voxels``), ``normal`` (3), ``nw`` (its normal . w), ``band`` (its fill
+      times the share of the pixel's footprint whose rays cross it inside the
+      voxel), ``hit`` (its fill where the centre ray crosses it, else 0),
+      ``counted`` (``hit`` if crossed, else ``band``), ``color`` (3) and ``t``
+      (crossing parameter from the voxel's entry, grid units).
     """
 
     projected: np.ndarray
@@ -454,6 +486,38 @@ class SheetTerms:
     t_cross: np.ndarray
     sheet_color: np.ndarray
     cloud_color: np.ndarray
+    run: dict[str, np.ndarray]
+
+
+def crossing_fraction(lo: np.ndarray, hi: np.ndarray, half_width: np.ndarray) -> np.ndarray:
+    """Share in [0, 1] of a pixel's footprint whose rays cross a sheet's
+    plane inside a voxel. The footprint's rays are offset from the centre ray
+    along the plane's normal by up to ``half_width`` (grid units: half a
+    pixel's width there times the normal's part across the ray, a box seen
+    along it), and those offset by ``[lo, hi]`` cross inside the ray's
+    stretch of the voxel. ``half_width`` 0 is the centre ray: 1 or 0.
+    Mirrors volume.frag."""
+    lo, hi, hw = np.broadcast_arrays(*(np.asarray(x, dtype=np.float64) for x in (lo, hi, half_width)))
+    point = ((lo <= 0.0) & (hi >= 0.0)).astype(np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        box = np.clip((np.minimum(hi, hw) - np.maximum(lo, -hw)) / (2.0 * hw), 0.0, 1.0)
+    return np.where(hw <= 1e-7, point, box)
+
+
+def run_coverage(band: np.ndarray, hit: np.ndarray) -> float:
+    """Coverage of a run of surface sheets from its sums on each side (2,):
+    the side where the ray met the run's first sheet (entering a surface)
+    and the side turned back (leaving it, as at a silhouette's far side;
+    :data:`RUN_PARALLEL`). ``band``: the fills times the footprint's shares
+    crossing them; ``hit``: the fills of those the centre ray crosses. Where
+    it crosses sheets on one side only (a surface cut by voxel faces, a
+    corner), their fills, whole; elsewhere (a near miss, or through both
+    sides of a silhouette) the share of the footprint that crosses the side
+    it crosses most. Mirrors volume.frag."""
+    cov = float(np.max(band))
+    if (hit[0] > 0.0) != (hit[1] > 0.0):
+        cov = max(cov, float(np.max(hit)))
+    return min(max(cov, 0.0), 1.0)
 
 
 def sheet_terms(
@@ -467,6 +531,7 @@ def sheet_terms(
     normal: str = "mean",
     voxel_pixels: np.ndarray | float = np.inf,
     sheets: EntrySheets | None = None,
+    edges: str = "filtered",
 ) -> SheetTerms:
     """:class:`SheetTerms` of ``voxels`` (V,) crossed along the unit vector
     ``w`` from the voxel-local points ``x_in`` (V, 3; the voxel is the unit
@@ -477,7 +542,11 @@ def sheet_terms(
     A ray crosses a sheet's plane inside the voxel when the plane's signed
     distance changes sign (within the sheet's slack) between where the ray
     enters and leaves: a plane cut into many voxels is crossed in exactly one
-    of them, whatever the angle."""
+    of them, whatever the angle. With ``edges="filtered"``, surface sheets
+    (:data:`RUN_SHARE`) also count the share of the pixel's footprint (a
+    voxel spans ``voxel_pixels``) crossing them, for the ray's runs
+    (:func:`run_coverage`): along a plane cut by voxel faces the shares add
+    up to 1, and a silhouette or a near miss gets its partial coverage."""
     w = np.asarray(w, dtype=np.float64)
     w = w / np.linalg.norm(w)
     voxels = np.asarray(voxels, dtype=np.int64)
@@ -493,18 +562,29 @@ def sheet_terms(
     nh, a_s, fill = sh.normal[at], share * sh.area[at], share * sh.fill[at]
     nw = nh @ w
     projected = np.bincount(owner, a_s * np.abs(nw), minlength=V)
+    counted, band, t_hit = np.zeros(len(rows)), np.zeros(len(rows)), np.zeros(len(rows))
+    hit = surface = np.zeros(len(rows), dtype=bool)
     if opacity == "split":
         ws = a_s * np.abs(nw)
-        t_hit = np.zeros(len(rows))
     else:
         s_in = np.einsum("ek,ek->e", nh, np.asarray(x_in, np.float64)[owner]) - sh.offset[at]
         s_out = s_in + nw * np.asarray(chords, np.float64)[owner]
         slack = sh.slack[at]
-        hit = (np.minimum(s_in, s_out) <= slack) & (np.maximum(s_in, s_out) >= -slack)
-        ws = np.where(hit & (a_s > 0), fill, 0.0)
+        lo, hi = -np.maximum(s_in, s_out), -np.minimum(s_in, s_out)
+        hit = (lo - slack <= 0.0) & (hi + slack >= 0.0) & (a_s > 0)
         with np.errstate(divide="ignore", invalid="ignore"):
             t_hit = np.where(nw != 0, -s_in / nw, 0.0)
         t_hit = np.clip(t_hit, 0.0, np.asarray(chords, np.float64)[owner])
+        pixels = np.broadcast_to(np.asarray(voxel_pixels, dtype=np.float64), (V,))[owner]
+        with np.errstate(divide="ignore"):
+            foot = np.zeros(len(rows)) if edges == "sampled" else 1.0 / pixels
+        surface = (foot > 0.0) & (sh.share[at] >= RUN_SHARE) & (a_s > 0)
+        # The band without the slack: that only keeps a centre ray from
+        # slipping between neighbouring planes.
+        half_w = 0.5 * foot * np.sqrt(np.maximum(1.0 - nw * nw, 0.0))
+        band = np.where(surface, fill * crossing_fraction(lo, hi, half_w), 0.0)
+        counted = np.where(surface, np.where(hit, fill, band), 0.0)
+        ws = np.where(hit & ~surface, fill, 0.0)
     crossed = np.bincount(owner, ws, minlength=V)
     with np.errstate(divide="ignore", invalid="ignore"):
         t_cross = np.where(crossed > 0, np.bincount(owner, ws * t_hit, minlength=V) / crossed, 0.0)
@@ -517,7 +597,11 @@ def sheet_terms(
         _weighted_colors(owner, V, c, cloud_w, zero),
         _weighted_colors(owner, V, c, all_w, area),
     )
-    return SheetTerms(projected, crossed, t_cross, sheet_color, cloud_color)
+    keep = counted > 0.0
+    run = {"voxel": owner[keep], "normal": nh[keep], "nw": nw[keep], "band": band[keep],
+           "hit": np.where(hit, fill, 0.0)[keep], "counted": counted[keep], "color": c[keep],
+           "t": t_hit[keep]}  # fmt: skip
+    return SheetTerms(projected, crossed, t_cross, sheet_color, cloud_color, run)
 
 
 # ------------------------------------------------------------ the NumPy ray
@@ -546,6 +630,7 @@ def march_ray_np(
     normal: str = "mean",
     opacity: str = DEFAULT_OPACITY,
     pixel_angle: float = 0.0,
+    edges: str = "filtered",
 ) -> tuple[np.ndarray, float]:
     """One ray through ``texture``, the slow twin of a GPU pixel.
 
@@ -555,10 +640,10 @@ def march_ray_np(
     pixel spans, radians (the renderer's ``2 tan(fov / 2) / height``): a
     voxel at distance r from the eye spans ``h / (r pixel_angle)`` pixels,
     which the sheet law "planar" reads (:func:`sheet_share`); 0 stands for a
-    point sample. Returns the pixel's (3,) RGB in [0, 1], ``C + T *
-    background``, and its alpha ``1 - T``.
+    point sample. ``edges`` is :attr:`VolumeOptions.edges`. Returns the
+    pixel's (3,) RGB in [0, 1], ``C + T * background``, and its alpha ``1 - T``.
     """
-    tr = trace_ray_np(texture, origin, direction, lighting, t_range, density, normal, opacity, pixel_angle)
+    tr = trace_ray_np(texture, origin, direction, lighting, t_range, density, normal, opacity, pixel_angle, edges)
     return tr.rgb, tr.alpha
 
 
@@ -572,8 +657,10 @@ def trace_ray_np(
     normal: str = "mean",
     opacity: str = DEFAULT_OPACITY,
     pixel_angle: float = 0.0,
+    edges: str = "filtered",
 ) -> RayTrace:
     """:func:`march_ray_np` with what the ray met (see :class:`RayTrace`)."""
+    _check_choice(edges, EDGE_MODES, "volume edges")
     _check_choice(density, DENSITY_MODES, "density reading")
     _check_choice(normal, NORMAL_MODES, "normal")
     _check_choice(opacity, OPACITY_MODES, "opacity law")
@@ -639,12 +726,32 @@ def trace_ray_np(
         # voxels from the eye).
         with np.errstate(divide="ignore"):
             pixels = 1.0 / ((t_in + 0.5 * chords) * float(pixel_angle))
-        st = sheet_terms(texture, d, lighting, vox, x_in, chords, opacity, normal, pixels)
+        st = sheet_terms(texture, d, lighting, vox, x_in, chords, opacity, normal, pixels, edges=edges)
     C, T = np.zeros(3), 1.0
     tau_s, T_f = 0.0, 1.0  # "split": the sheets' linear depth, the cloud's transmittance
+    # "planar": the open run of surface sheets (volume.frag: g_run...): sums
+    # of band and hit per side, colour, weight, weighted t (from the eye).
+    run: dict | None = None
+
+    def close_run() -> None:
+        nonlocal C, T, run
+        if run is not None:
+            cov = run_coverage(run["band"], run["hit"])
+            if cov > 0.0 and run["w"] > 0.0:
+                seg = T * cov
+                if out.t50 is None and T > 0.5 and T - seg <= 0.5:
+                    out.t50 = run["tw"] / run["w"] * h
+                C = C + seg * run["col"] / run["w"]
+                T -= seg
+        run = None
+
     for k, ((v, ti, chord, _), D, col) in enumerate(zip(hits, dens, cols, strict=True)):
         if T <= T_MIN:
             break
+        if run is not None and ti > run["end"] + RUN_GAP:
+            close_run()  # the GPU closes it on its way to this voxel
+            if T <= T_MIN:
+                break
         if opacity == "exponential":
             alpha = min(max(D / P, 0.0), ALPHA_MAX)
             sigma = -np.log1p(-alpha) * P
@@ -662,6 +769,27 @@ def trace_ray_np(
                 T_f *= keep_f
                 t_after = max(0.0, 1.0 - tau_s) * T_f
             else:
+                mine = st.run["voxel"] == k
+                if mine.any():
+                    # Surface sheets join the run, weighted by what the run
+                    # had left uncovered before this voxel; the side is
+                    # whether the ray meets each as it met the run's first.
+                    e = {key: val[mine] for key, val in st.run.items()}
+                    if run is None:
+                        run = {"ref": e["normal"][0], "band": np.zeros(2), "hit": np.zeros(2),
+                               "col": np.zeros(3), "w": 0.0, "tw": 0.0}  # fmt: skip
+                        open_ = 1.0
+                    else:
+                        open_ = 1.0 - run_coverage(run["band"], run["hit"])
+                    along = e["normal"] @ run["ref"]
+                    same = np.where(np.abs(along) >= RUN_PARALLEL, e["nw"] * (run["ref"] @ d) * along, 1.0)
+                    other = (same < 0.0).astype(np.int64)
+                    run["band"] = run["band"] + np.bincount(other, e["band"], minlength=2)
+                    run["hit"] = run["hit"] + np.bincount(other, e["hit"], minlength=2)
+                    run["col"] = run["col"] + open_ * (e["counted"] @ e["color"])
+                    run["w"] += open_ * float(e["counted"].sum())
+                    run["tw"] += open_ * float(e["counted"] @ (e["t"] + ti))
+                    run["end"] = ti + chord
                 # Sheet and cloud share the facets: their coverages add.
                 a_s = min(st.crossed[k], 1.0)
                 t_after = T * max(0.0, keep_f - a_s)
@@ -678,6 +806,7 @@ def trace_ray_np(
             out.t50 = (ti + _t50_offset(opacity, T, seg, sigma, chord, st, k)) * h
         C += seg * col
         T -= seg
+    close_run()
     if T <= T_MIN:  # stopped early: the rest takes the colour seen so far, as on the GPU
         C, T = C / (1.0 - T), 0.0
     out.rgb = np.clip(C + T * bg, 0.0, 1.0)
@@ -837,6 +966,8 @@ class VolumeOptions(DrawOptions):
             drawn may be on screen, framebuffer pixels (None: 1).
         march: how the rays find the occupied voxels, one of :data:`MARCH_MODES`
             (the same image; "plain" is the slower first version).
+        edges: how the "planar" law counts a sheet's crossing, one of
+            :data:`EDGE_MODES`.
     """
 
     what: ClassVar[str] = "volume"
@@ -847,9 +978,11 @@ class VolumeOptions(DrawOptions):
     opacity: str = DEFAULT_OPACITY
     pixel_error: float | None = None
     march: str = "skip"
+    edges: str = "filtered"
 
     def __post_init__(self) -> None:
         _check_choice(self.step, STEPS, "volume step")
+        _check_choice(self.edges, EDGE_MODES, "volume edges")
         _check_choice(self.march, MARCH_MODES, "volume marching")
         _check_choice(self.density, DENSITY_MODES, "density reading")
         _check_choice(self.normal, NORMAL_MODES, "normal")
@@ -884,6 +1017,9 @@ class VolumeRenderer:
             "BIG": _BIG,
             "TEX_WIDTH": TEX_WIDTH,
             "TEX_SHIFT": TEX_WIDTH.bit_length() - 1,
+            "RUN_SHARE": RUN_SHARE,
+            "RUN_PARALLEL": RUN_PARALLEL,
+            "RUN_GAP": RUN_GAP,
         }
         self._defines = defines
         self.prog = gl.program("volume.vert", "volume.frag", defines=defines)
@@ -996,6 +1132,7 @@ class VolumeRenderer:
                 "u_opacity_mode": OPACITY_MODES.index(opacity),
                 "u_pixel_angle": 2.0 * t / float(view.size[1]),
                 "u_sheet_pixels": tuple(float(x) for x in SHEET_PIXELS),
+                "u_edge_filter": 1.0 if opts.edges == "filtered" else 0.0,
                 "u_background": tuple(float(c) for c in view.lighting.background),
             },
         )
@@ -1081,6 +1218,7 @@ class VolumeRenderer:
                 "u_opacity_mode": OPACITY_MODES.index(opts.opacity),
                 "u_pixel_angle": 2.0 * t / float(view.size[1]),
                 "u_sheet_pixels": tuple(float(x) for x in SHEET_PIXELS),
+                "u_edge_filter": 1.0 if opts.edges == "filtered" else 0.0,
                 "u_background": tuple(float(c) for c in view.lighting.background),
             },
             strict=False,
