@@ -1,9 +1,15 @@
 """Fixtures shared by the GPU test modules."""
 
 import pytest
+from hypothesis import settings
 
 from aniso3d import ResourceError
 from aniso3d.rendering.renderer import Renderer
+
+# Property tests draw the same examples on every run (no example database):
+# a run passes or fails for the code, not for the examples it happened to draw.
+settings.register_profile("aniso3d", derandomize=True, database=None)
+settings.load_profile("aniso3d")
 
 #: Image size of the shared renderer: small enough for llvmpipe, large enough
 #: that test objects span many pixels.
