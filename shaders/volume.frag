@@ -56,8 +56,8 @@ vec3 g_light_dir[4];
 // Injected by render/volume.py: BRICK (brick edge in voxels), ALPHA_MAX
 // (coverage cap below 1 so the optical depth stays finite), T_MIN (early
 // termination; T_MIN_PLAIN in the plain marching), BIG (stands for an
-// infinite ray parameter), RUN_SHARE, RUN_GAP and RUN_PARALLEL (the runs
-// of surface sheets: render/volume.py:sheet_terms).
+// infinite ray parameter), RUN_SHARE, RUN_GAP, RUN_PARALLEL and RUN_STEEP
+// (the runs of surface sheets: render/volume.py:sheet_terms).
 
 uniform vec2 u_size;
 uniform vec3 u_forward;
@@ -276,6 +276,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
     float foot = u_edge_filter / pixels;  // the pixel's footprint, voxel units
     bool in_run = false;       // planar: the voxel holds surface sheets near the ray
     float run_open = 1.0;      // ... and what the run left uncovered before it
+    bool steep = false;        // ... and the centre ray crosses one of them steeply
     float sheet_proj = 0.0;    // sum A_s |n . w|: the sheets' projected area
     float crossed = 0.0;       // planar: fills of the sheets crossed; split: sheet_proj
     float t_cross = 0.0;       // planar: fill-weighted crossing parameter from t0
@@ -358,6 +359,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                         int side = same >= 0.0 ? 0 : 1;
                         g_run_band[side] += band;
                         g_run_hit[side] += hit ? fill : 0.0;
+                        steep = steep || (hit && abs(nw) >= RUN_STEEP);
                         g_run_col += run_open * counted * c;
                         g_run_w += run_open * counted;
                         g_run_tw += run_open * counted * (t0 + th);
@@ -425,7 +427,14 @@ void composite(int v, vec3 x_in, float t0, float chord) {
             color = (a_s * cs + a_f * cf) / (a_s + a_f);
         }
     }
-    if (!(seg > 0.0)) return;
+    // A run crossed whole on one side, steeply, is settled: its far side
+    // could only follow within RUN_GAP through an object under a voxel thick.
+    bool settled = steep && ((g_run_hit.x >= 1.0) != (g_run_hit.y >= 1.0))
+                   && min(g_run_hit.x, g_run_hit.y) == 0.0;
+    if (!(seg > 0.0)) {
+        if (settled) close_run();
+        return;
+    }
     t_after = g_trans - seg;
     if (!g_has50 && t_after <= 0.5) {
         float dt = 0.0;
@@ -447,6 +456,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
     }
     g_color += seg * color;
     g_trans = t_after;
+    if (settled) close_run();
 }
 
 // Amanatides-Woo set-up for cells of edge `size` inside [lo, hi) at ray

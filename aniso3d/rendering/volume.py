@@ -176,6 +176,12 @@ RUN_GAP = 1.0
 #: for the near and far sides of a silhouette; one across it (the two faces
 #: of a corner or of a box's edge) is on the first side.
 RUN_PARALLEL = 0.5
+#: A run whose centre ray crosses whole fills on one side only, one of them
+#: at ``|n . w|`` at least this, closes at once: its far side could only
+#: follow within :data:`RUN_GAP` through an object under a voxel thick
+#: (a surface of curvature radius R voxels is crossed twice within a voxel
+#: or two only at ``|n . w|`` below about 1 / R), so the ray stops there.
+RUN_STEEP = 0.5
 #: uint32 words per shading entry on the GPU (three uvec4; see volume.frag).
 ENTRY_WORDS = 12
 #: Width in texels of the 2D textures the arrays of :func:`pack_volume` are
@@ -790,6 +796,7 @@ def trace_ray_np(
                     run["w"] += open_ * float(e["counted"].sum())
                     run["tw"] += open_ * float(e["counted"] @ (e["t"] + ti))
                     run["end"] = ti + chord
+                    run["steep"] = bool(((e["hit"] > 0.0) & (np.abs(e["nw"]) >= RUN_STEEP)).any())
                 # Sheet and cloud share the facets: their coverages add.
                 a_s = min(st.crossed[k], 1.0)
                 t_after = T * max(0.0, keep_f - a_s)
@@ -797,7 +804,14 @@ def trace_ray_np(
             a_s, a_f = min(a_s, 1.0), 1.0 - keep_f
             if a_s + a_f > 0.0:
                 col = (a_s * st.sheet_color[k] + a_f * st.cloud_color[k]) / (a_s + a_f)
+        # A run crossed whole on one side, steeply, is settled (volume.frag).
+        settled = (
+            run is not None and st is not None and opacity == "planar" and bool((st.run["voxel"] == k).any())
+            and run["steep"] and (run["hit"][0] >= 1.0) != (run["hit"][1] >= 1.0) and min(run["hit"]) == 0.0
+        )  # fmt: skip
         if not seg > 0.0:
+            if settled:
+                close_run()
             continue
         out.voxels.append(v)
         out.t_enter.append(ti * h)
@@ -806,6 +820,8 @@ def trace_ray_np(
             out.t50 = (ti + _t50_offset(opacity, T, seg, sigma, chord, st, k)) * h
         C += seg * col
         T -= seg
+        if settled:
+            close_run()
     close_run()
     if T <= T_MIN:  # stopped early: the rest takes the colour seen so far, as on the GPU
         C, T = C / (1.0 - T), 0.0
@@ -1019,6 +1035,7 @@ class VolumeRenderer:
             "TEX_SHIFT": TEX_WIDTH.bit_length() - 1,
             "RUN_SHARE": RUN_SHARE,
             "RUN_PARALLEL": RUN_PARALLEL,
+            "RUN_STEEP": RUN_STEEP,
             "RUN_GAP": RUN_GAP,
         }
         self._defines = defines
