@@ -47,7 +47,17 @@ conventions"), with ``P(w) = |wx| + |wy| + |wz|`` and h the voxel edge:
   the neighbours) is a sheet at every scale; a partial one (a leaf, an
   edge) is crossed all or nothing, which one ray per pixel samples well only
   on voxels spanning a few pixels, so on smaller ones it fades into its cloud,
-  the filtered average (:data:`SHEET_PIXELS`). ``opacity="split"`` is the
+  the filtered average (:data:`SHEET_PIXELS`). A surface sheet's edge,
+  crossed all or nothing by the centre ray, would alias like one polygon
+  sample per pixel (its silhouette is the volume's whole error on a smooth
+  closed object); so with ``edges="filtered"`` (default, :data:`EDGE_MODES`)
+  the surface sheets a ray meets within :data:`RUN_GAP` of each other form a
+  *run*, composited as one layer when the ray leaves it: covered whole where
+  the centre ray crosses them on one side only (a surface cut by voxel faces,
+  a corner), else (a near miss, or through both sides of a silhouette) by
+  the share of the pixel's footprint whose rays cross them inside their
+  voxels (:func:`crossing_fraction`), on the side that most do
+  (:func:`run_coverage`; docs/coverage.md). ``opacity="split"`` is the
   candidate that keeps the chord: sheets add up linearly along the ray (T =
   ``max(0, 1 - tau_s) exp(-tau_f)``); measured, it keeps the stripes of
   "linear" on tilted planes;
