@@ -159,6 +159,10 @@ SHEET_BEND_MAX = 0.01
 #: plane's section of the voxel it fills: ramp from 0 at the first value to 1
 #: at the second (see :class:`EntrySheets`).
 SHEET_FILL = (0.7, 0.95)
+#: An entry facing against its voxel's largest entry counts with it as one
+#: surface wound either way (:func:`entry_sheets`) when its centroid lies
+#: within this (voxel units) of that entry's plane.
+SHEET_FLIP_GAP = 0.05
 #: Every entry is a sheet in proportion to its voxel's size in pixels: ramp
 #: from 0 at the first value to 1 at the second (see :func:`sheet_share`).
 SHEET_PIXELS = (1.0, 3.0)
@@ -450,8 +454,21 @@ def entry_sheets(texture: AnisoTexture, voxels: np.ndarray | None = None) -> Ent
     local = (centroid - np.asarray(texture.origin, np.float64)) / h - cell
     nh, d, section = _sections(n, local)
     # The voxel's facets together: net area along their mean normal over the
-    # section of the plane through their centroid.
-    net = np.stack([np.bincount(owner, area * n[:, i], minlength=V) for i in range(3)], axis=1)
+    # section of the plane through their centroid. A surface whose facets are
+    # wound either way (a scan, a careless export) is filed under opposite
+    # sample directions, and its halves must not cancel: an entry facing
+    # against the voxel's largest entry and lying in its plane (within
+    # SHEET_FLIP_GAP) is turned to its side first; the two faces of a thin
+    # slab, a voxel's width apart, and leaves at random are left as they are.
+    order = np.lexsort((area, owner))
+    last = np.r_[owner[order][1:] != owner[order][:-1], True] if len(order) else np.zeros(0, bool)
+    big = order[last]
+    ref_n, ref_c = np.zeros((V, 3)), np.zeros((V, 3))
+    ref_n[owner[big]], ref_c[owner[big]] = nh[big], local[big]
+    facing = np.einsum("ek,ek->e", nh, ref_n[owner])
+    apart = np.abs(np.einsum("ek,ek->e", local - ref_c[owner], ref_n[owner]))
+    turned = np.where((facing < -0.5) & (apart <= SHEET_FLIP_GAP), -1.0, 1.0)[:, None] * n
+    net = np.stack([np.bincount(owner, area * turned[:, i], minlength=V) for i in range(3)], axis=1)
     total = np.maximum(np.bincount(owner, area, minlength=V), 1e-300)
     centre = np.stack([np.bincount(owner, area * local[:, i], minlength=V) for i in range(3)], 1) / total[:, None]
     _, _, voxel_section = _sections(net, centre)
