@@ -25,7 +25,7 @@ from aniso3d.rendering.camera import Camera
 from aniso3d.rendering.frame import FrameView
 from aniso3d.rendering.lighting import Lighting, shade_np
 from aniso3d.rendering.renderer import Renderer
-from aniso3d.rendering.splat import AA_LAYERS, SplatOptions
+from aniso3d.rendering.splat import AA_CLOSE, AA_LAYERS, SplatOptions
 from aniso3d.rendering.splat.reference import Fragments, composite_np, subpixel_fragments_np
 
 SIZE = (64, 64)
@@ -243,13 +243,18 @@ def test_translucent_sheets_compose_as_independent_layers(r):
     inside = img[20:44, 20:44, 3]
     assert abs(float(inside.mean()) - (1.0 - 0.7**5)) < 0.01, inside.mean()
     # The same sheets 1e-4 apart, well within one surface's span, are one
-    # surface: each pixel reads min(1, its summed coverage), 1.5 on average.
+    # surface: each pixel reads min(1, its summed coverage), 1.5 on average,
+    # or 1 where the surface is whole (its sum and its neighbours' high).
     close = merge(*(PointCloud(s.positions * [1, 1, 0] + [0, 0, -1e-4 * k], s.normals, s.areas, s.kd, s.ks,
                                s.shininess) for k, s in enumerate(sheets)))  # fmt: skip
     img, view = draw_float(r, close)
     frags = subpixel_fragments_np(close, view, SplatOptions(quality="high"))
     total = np.bincount(frags.pixel, frags.coverage, SIZE[0] * SIZE[1]).reshape(SIZE[::-1])
-    assert np.abs(img[..., 3] - np.minimum(total, 1.0)).max() < TOL
+    _, alpha = composite_np(frags, view.lighting.background)
+    assert np.abs(img[..., 3] - alpha).max() < TOL
+    whole = alpha > np.minimum(total, 1.0) + 1e-9
+    assert np.all(alpha[whole] == 1.0) and np.all(total[whole] >= AA_CLOSE[0])
+    assert np.abs(img[~whole][..., 3] - np.minimum(total[~whole], 1.0)).max() < TOL
     assert float(img[20:44, 20:44, 3].mean()) > 0.97
 
 
