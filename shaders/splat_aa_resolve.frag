@@ -10,13 +10,13 @@
 // the visibility pass's linear depth (t - near) / (far - near), pushed.
 // The rule (aniso3d/rendering/splat/reference.py is its NumPy twin):
 //   within a surface, splats tile: its coverage is a = min(1, sum c);
-//   the nearest surface is closed (a = 1) where its sum reaches CLOSE_OWN and
-//     its mean sum over the pixel and its four neighbours reaches CLOSE_MEAN,
-//     a neighbour counting when its nearest surface starts less than
-//     CLOSE_REACH u_span slices from this one's (0 otherwise, and off the
-//     image): sub-pixel footprints (boxes at the splats' centres) do not tile
-//     a sheet exactly, so its sums scatter about 1 where it is whole, and
-//     what lies behind would show through every pixel below 1;
+//   the nearest surface is whole (a = 1) where its sum reaches CLOSE_OWN and
+//     the mean of min(1, sum) over the pixel and its four neighbours reaches
+//     CLOSE_MEAN, a neighbour counting when its nearest surface starts less
+//     than CLOSE_REACH u_span slices from this one's (0 otherwise, and off
+//     the image): sub-pixel footprints (boxes at the splats' centres) do not
+//     tile a sheet exactly, so its sums scatter about 1 where it is whole,
+//     and what lies behind would show through every pixel below 1;
 //   the last layer holds n = surfaces - (LAYERS - 1) surfaces, taken to share
 //     its sum equally: a = 1 - (1 - min(1, sum c / n))^n (exact for equal
 //     ones, less than independent unequal ones would cover);
@@ -36,7 +36,7 @@
 #ifndef CLOSE_OWN  // injected from aniso3d/rendering/splat/params.py (AA_CLOSE)
 #define CLOSE_OWN 0.7
 #define CLOSE_MEAN 0.9
-#define CLOSE_REACH 2.0
+#define CLOSE_REACH 3.0
 #endif
 
 uniform sampler2D u_layer[LAYERS];
@@ -75,7 +75,7 @@ bool closed(ivec2 px, float own, float start) {
         if (any(lessThan(q, ivec2(0))) || any(greaterThanEqual(q, size))) continue;
         float c = texelFetch(u_layer[0], q, 0).a;
         float s = float(texelFetch(u_surfaces, q, 0).w & 0xFFFFu);
-        if (c > 0.0 && abs(s - start) < CLOSE_REACH * u_span) sum += c;
+        if (c > 0.0 && abs(s - start) < CLOSE_REACH * u_span) sum += min(c, 1.0);
     }
     return sum >= 5.0 * CLOSE_MEAN;
 }

@@ -37,17 +37,19 @@ AA_SLICES = 512
 AA_SPAN = 2.0
 #: When quality "high" takes a pixel's nearest surface as whole (coverage 1):
 #: (own, mean, reach): its coverages sum to at least ``own`` in the pixel,
-#: and on average to at least ``mean`` over the pixel and its four
-#: neighbours, a neighbour counting where its nearest surface starts less
-#: than ``reach`` spans (AA_SPAN) from this one's. Sub-pixel footprints (boxes
-#: of the true area at the splats' centres) do not tile a sheet exactly: a
-#: minified smooth blob's sums scatter from 0.83 to 1.16 inside (1st to 99th
-#: percentile), and its back showed through every pixel below 1 as a
-#: speckle. Measured with the NumPy twin on the corpus's minified cameras
-#: (docs/splat_aa.md): own 0.5 / 0.7 / 0.8 and reach 1 / 2 / 3 spans; reach 3
-#: cost the room 0.1 dB, own 0.8 closed less of the blob; the foliage, the
-#: lattice and the mixed scene unchanged by any.
-AA_CLOSE = (0.7, 0.9, 2.0)
+#: and the mean of min(1, sum) over the pixel and its four neighbours is at
+#: least ``mean``, a neighbour counting where its nearest surface starts less
+#: than ``reach`` spans (the ``span`` of AA_SPAN, in slices) from this one's.
+#: Sub-pixel footprints (boxes of the true area at the splats' centres) do
+#: not tile a sheet exactly: inside a minified smooth blob the sums scatter
+#: from 0.83 to 1.16 (1st to 99th percentile), and its back showed through
+#: every pixel below 1 as a speckle. Measured on the corpus's close and
+#: minified cameras (docs/splat_aa.md): reach 1 / 2 / 3 / 4 spans, own 0.5 /
+#: 0.7 / 0.8, mean 0.85 / 0.9 / 0.95: within 0.1 dB of each other but for
+#: reach 1 (the blob's rim, whose depth changes fast, kept its speckle);
+#: unclamped neighbour sums closed the edges of resolved splats (sums up to
+#: the size factor squared), 0.12 dB off the lattice close up.
+AA_CLOSE = (0.7, 0.9, 3.0)
 #: A fragment's depth in quality "high" is where its pixel's ray meets the
 #: splat's plane, kept within the splat's bounding sphere grown by this many
 #: pixels (at the splat's depth): the fragments of a tilted surface tiled by
