@@ -10,13 +10,13 @@
 // the visibility pass's linear depth (t - near) / (far - near), pushed.
 // The rule (aniso3d/rendering/splat/reference.py is its NumPy twin):
 //   within a surface, splats tile: its coverage is a = min(1, sum c);
-//   the nearest surface is whole (a = 1) where its sum reaches CLOSE_OWN and
-//     the mean of min(1, sum) over the pixel and its four neighbours reaches
-//     CLOSE_MEAN, a neighbour counting when its nearest surface starts less
-//     than CLOSE_REACH u_span slices from this one's (0 otherwise, and off
-//     the image): sub-pixel footprints (boxes at the splats' centres) do not
-//     tile a sheet exactly, so its sums scatter about 1 where it is whole,
-//     and what lies behind would show through every pixel below 1;
+//   the nearest surface is whole (a = 1) where the mean of min(1, sum) over
+//     the pixel and its four neighbours reaches CLOSE_MEAN, a neighbour
+//     counting when its nearest surface starts less than CLOSE_REACH u_span
+//     slices from this one's (0 otherwise, and off the image): sub-pixel
+//     footprints (boxes at the splats' centres) do not tile a sheet exactly,
+//     so its sums scatter about 1 where it is whole, and what lies behind
+//     would show through every pixel below 1;
 //   the last layer holds n = surfaces - (LAYERS - 1) surfaces, taken to share
 //     its sum equally: a = 1 - (1 - min(1, sum c / n))^n (exact for equal
 //     ones, less than independent unequal ones would cover);
@@ -33,8 +33,7 @@
 #ifndef LAYERS
 #define LAYERS 4
 #endif
-#ifndef CLOSE_OWN  // injected from aniso3d/rendering/splat/params.py (AA_CLOSE)
-#define CLOSE_OWN 0.7
+#ifndef CLOSE_MEAN  // injected from aniso3d/rendering/splat/params.py (AA_CLOSE)
 #define CLOSE_MEAN 0.9
 #define CLOSE_REACH 3.0
 #endif
@@ -66,7 +65,8 @@ void layer(vec4 acc, float n, bool whole, inout vec3 colour, inout float trans) 
 // Whether the nearest surface, summing to own here and starting at slice
 // start, is closed (see the top).
 bool closed(ivec2 px, float own, float start) {
-    if (!(own >= CLOSE_OWN && own < 1.0)) return false;  // above 1 it is whole anyway
+    // Above 1 it is whole anyway; below 5 CLOSE_MEAN - 4 the neighbours cannot make it.
+    if (!(own >= 5.0 * CLOSE_MEAN - 4.0 && own < 1.0)) return false;
     ivec2 size = textureSize(u_layer[0], 0);
     float sum = own;
     const ivec2 steps[4] = ivec2[4](ivec2(1, 0), ivec2(-1, 0), ivec2(0, 1), ivec2(0, -1));

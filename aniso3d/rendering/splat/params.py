@@ -36,20 +36,21 @@ AA_SLICES = 512
 #: next occupied slice beyond starts the next surface.
 AA_SPAN = 2.0
 #: When quality "high" takes a pixel's nearest surface as whole (coverage 1):
-#: (own, mean, reach): its coverages sum to at least ``own`` in the pixel,
-#: and the mean of min(1, sum) over the pixel and its four neighbours is at
-#: least ``mean``, a neighbour counting where its nearest surface starts less
-#: than ``reach`` spans (the ``span`` of AA_SPAN, in slices) from this one's.
-#: Sub-pixel footprints (boxes of the true area at the splats' centres) do
-#: not tile a sheet exactly: inside a minified smooth blob the sums scatter
-#: from 0.83 to 1.16 (1st to 99th percentile), and its back showed through
-#: every pixel below 1 as a speckle. Measured on the corpus's close and
-#: minified cameras (docs/splat_aa.md): reach 1 / 2 / 3 / 4 spans, own 0.5 /
-#: 0.7 / 0.8, mean 0.85 / 0.9 / 0.95: within 0.1 dB of each other but for
-#: reach 1 (the blob's rim, whose depth changes fast, kept its speckle);
-#: unclamped neighbour sums closed the edges of resolved splats (sums up to
-#: the size factor squared), 0.12 dB off the lattice close up.
-AA_CLOSE = (0.7, 0.9, 3.0)
+#: (mean, reach): the mean of min(1, sum of its coverages) over the pixel and
+#: its four neighbours is at least ``mean``, a neighbour counting where its
+#: nearest surface starts less than ``reach`` spans (the ``span`` of AA_SPAN,
+#: in slices) from this one's (so the pixel's own sum is at least
+#: 5 mean - 4). Sub-pixel footprints (boxes of the true area at the splats'
+#: centres) do not tile a sheet exactly: inside a minified smooth blob the
+#: sums scatter from 0.83 to 1.16 (1st to 99th percentile), and its back
+#: showed through every pixel below 1 as a speckle. Measured on the corpus's
+#: close and minified cameras (docs/splat_aa.md): reach 1 / 2 / 3 / 4 spans
+#: (at 1 the blob's rim, whose depth changes fast, kept its speckle), mean
+#: 0.85 / 0.9 / 0.95, and a further floor on the pixel's own sum of 0.7 or
+#: 0.8 (slightly worse on the blob and shell, none better); unclamped
+#: neighbour sums closed the edges of resolved splats (sums up to the size
+#: factor squared), 0.12 dB off the lattice close up.
+AA_CLOSE = (0.9, 3.0)
 #: A fragment's depth in quality "high" is where its pixel's ray meets the
 #: splat's plane, kept within the splat's bounding sphere grown by this many
 #: pixels (at the splat's depth): the fragments of a tilted surface tiled by

@@ -159,9 +159,8 @@ class SplatPipeline:
         plane, for an early depth test)."""
         defines: dict[str, object] = {}
         if aa:
-            own, mean, reach_ = (float(x) for x in AA_CLOSE)
-            defines = {"LAYERS": AA_LAYERS, "WORDS": AA_SLICES // 32, "CLOSE_OWN": own, "CLOSE_MEAN": mean,
-                       "CLOSE_REACH": reach_}  # fmt: skip
+            mean, reach_ = (float(x) for x in AA_CLOSE)
+            defines = {"LAYERS": AA_LAYERS, "WORDS": AA_SLICES // 32, "CLOSE_MEAN": mean, "CLOSE_REACH": reach_}
         if far:
             defines["FAR"] = 1
         prog = self.gl.program("splat_resolve.vert", fragment, defines=defines)

@@ -22,8 +22,8 @@ fraction of the pixel a splat covers; linear depth z; colour):
    last layer's n surfaces are taken to share its sum equally,
    a = 1 - (1 - min(1, sum c / n))^n. Its colour is the coverage-weighted
    mean of its fragments' colours. The nearest surface is whole (a = 1)
-   where its sum reaches ``own`` and the mean of min(1, sum) over the pixel
-   and its four neighbours reaches ``mean`` (:data:`~aniso3d.rendering.splat.params.AA_CLOSE`),
+   where the mean of min(1, sum) over the pixel and its four neighbours
+   reaches ``mean`` (:data:`~aniso3d.rendering.splat.params.AA_CLOSE`),
    a neighbour counting where its nearest surface starts less than ``reach``
    spans from this one's (0 otherwise, and off the image): sub-pixel
    footprints do not tile a sheet exactly, so its sums scatter about 1.
@@ -214,14 +214,14 @@ def closed_np(own: np.ndarray, start: np.ndarray, span: float) -> np.ndarray:
     """(H, W) bool: where the nearest surface is whole (rule step 5), from its
     sum of coverages ``own`` (H, W) and first slice ``start`` (H, W; inf
     where the pixel holds nothing)."""
-    min_own, min_mean, reach = AA_CLOSE
-    total = own.copy()
+    min_mean, reach = AA_CLOSE
+    total = np.minimum(own, 1.0)
     for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0)):
         c, s = _shifted(own, dy, dx, 0.0), _shifted(start, dy, dx, np.inf)
         with np.errstate(invalid="ignore"):
             same = (c > 0) & (np.abs(s - start) < reach * span)
         total += np.where(same, np.minimum(c, 1.0), 0.0)
-    return (own >= min_own) & (own < 1.0) & (total >= 5.0 * min_mean)
+    return (own < 1.0) & (total >= 5.0 * min_mean)
 
 
 def composite_np(
