@@ -51,10 +51,10 @@ uniform int u_mode;
 out vec4 f_color;
 
 // One layer of n surfaces (sampler arrays take constant indices only in GLSL
-// 3.30, so the loop over layers is unrolled below); whole: coverage 1.
-void layer(vec4 acc, float n, bool whole, inout vec3 colour, inout float trans) {
+// 3.30, so the loop over layers is unrolled below); is_whole: coverage 1.
+void layer(vec4 acc, float n, bool is_whole, inout vec3 colour, inout float trans) {
     if (acc.a > 0.0) {
-        float a = whole ? 1.0 : n > 1.0 ? 1.0 - pow(1.0 - min(acc.a / n, 1.0), n) : min(acc.a, 1.0);
+        float a = is_whole ? 1.0 : n > 1.0 ? 1.0 - pow(1.0 - min(acc.a / n, 1.0), n) : min(acc.a, 1.0);
         colour += trans * a * (acc.rgb / acc.a);
         trans *= 1.0 - a;
     }
@@ -62,21 +62,25 @@ void layer(vec4 acc, float n, bool whole, inout vec3 colour, inout float trans) 
 
 #define LAYER(i) layer(texelFetch(u_layer[i], px, 0), i == LAYERS - 1 ? last : 1.0, false, colour, trans)
 
+// What a neighbour q adds to the whole-surface test: min(1, its first
+// layer's sum) where its nearest surface starts within CLOSE_REACH spans of
+// start, else 0 (and off the image).
+float neighbour(ivec2 q, ivec2 size, float start) {
+    if (any(lessThan(q, ivec2(0))) || any(greaterThanEqual(q, size))) return 0.0;
+    float c = texelFetch(u_layer[0], q, 0).a;
+    float s = float(texelFetch(u_surfaces, q, 0).w & 0xFFFFu);
+    return c > 0.0 && abs(s - start) < CLOSE_REACH * u_span ? min(c, 1.0) : 0.0;
+}
+
 // Whether the nearest surface, summing to own here and starting at slice
-// start, is closed (see the top).
-bool closed(ivec2 px, float own, float start) {
+// start, is whole (see the top). Four calls, not a loop over an array of
+// offsets: llvmpipe puts an indexed local array in memory.
+bool whole(ivec2 px, float own, float start) {
     // Above 1 it is whole anyway; below 5 CLOSE_MEAN - 4 the neighbours cannot make it.
     if (!(own >= 5.0 * CLOSE_MEAN - 4.0 && own < 1.0)) return false;
     ivec2 size = textureSize(u_layer[0], 0);
-    float sum = own;
-    const ivec2 steps[4] = ivec2[4](ivec2(1, 0), ivec2(-1, 0), ivec2(0, 1), ivec2(0, -1));
-    for (int i = 0; i < 4; ++i) {
-        ivec2 q = px + steps[i];
-        if (any(lessThan(q, ivec2(0))) || any(greaterThanEqual(q, size))) continue;
-        float c = texelFetch(u_layer[0], q, 0).a;
-        float s = float(texelFetch(u_surfaces, q, 0).w & 0xFFFFu);
-        if (c > 0.0 && abs(s - start) < CLOSE_REACH * u_span) sum += min(c, 1.0);
-    }
+    float sum = own + neighbour(px + ivec2(1, 0), size, start) + neighbour(px - ivec2(1, 0), size, start)
+              + neighbour(px + ivec2(0, 1), size, start) + neighbour(px - ivec2(0, 1), size, start);
     return sum >= 5.0 * CLOSE_MEAN;
 }
 
@@ -89,7 +93,7 @@ void main() {
     uint sw = texelFetch(u_surfaces, px, 0).w;
     float last = max(float(sw >> 16) - float(LAYERS - 1), 1.0);
     vec4 first = texelFetch(u_layer[0], px, 0);
-    layer(first, LAYERS == 1 ? last : 1.0, LAYERS > 1 && closed(px, first.a, float(sw & 0xFFFFu)), colour, trans);
+    layer(first, LAYERS == 1 ? last : 1.0, LAYERS > 1 && whole(px, first.a, float(sw & 0xFFFFu)), colour, trans);
 #if LAYERS > 1
     LAYER(1);
 #endif
