@@ -63,8 +63,8 @@
 #ifndef SLICES
 #define SLICES 512
 #endif
-#if LAYERS > 8 || LAYERS < 1
-#error 1 to 8 layers (one draw buffer each)
+#if LAYERS > 7 || LAYERS < 1
+#error 1 to 7 layers (one draw buffer each; splat_surfaces.frag packs their starts)
 #endif
 #define MIN_COVERAGE 1e-4
 #endif
@@ -191,9 +191,6 @@ int layer_of(float u) {
 #if LAYERS > 6
     k += int((r.z >> 16) <= s);
 #endif
-#if LAYERS > 7
-    k += int((r.w & 0xFFFFu) <= s);
-#endif
     return k;
 }
 #endif
@@ -250,9 +247,6 @@ void main() {
 #endif
 #if LAYERS > 6
     f_layer[6] = layer == 6 ? v : vec4(0.0);
-#endif
-#if LAYERS > 7
-    f_layer[7] = layer == 7 ? v : vec4(0.0);
 #endif
 #endif
 #else

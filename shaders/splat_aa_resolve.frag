@@ -5,10 +5,18 @@
 // over its fragments (c: the fraction of the pixel a splat covers; see
 // splat.frag, PASS 2 with AA): layer k < LAYERS - 1 holds the k-th surface
 // from the front, the last every surface from there on; u_surfaces
-// (splat_surfaces.frag), the number of surfaces in its w >> 16; u_visible,
+// (splat_surfaces.frag), the number of surfaces in its w >> 16 and surface
+// 0's first slice in its w & 0xFFFF; u_span, a surface's span in slices; u_visible,
 // the visibility pass's linear depth (t - near) / (far - near), pushed.
 // The rule (aniso3d/rendering/splat/reference.py is its NumPy twin):
 //   within a surface, splats tile: its coverage is a = min(1, sum c);
+//   the nearest surface is whole (a = 1) where the mean of min(1, sum) over
+//     the pixel and its four neighbours reaches CLOSE_MEAN, a neighbour
+//     counting when its nearest surface starts less than CLOSE_REACH u_span
+//     slices from this one's (0 otherwise, and off the image): sub-pixel
+//     footprints (boxes at the splats' centres) do not tile a sheet exactly,
+//     so its sums scatter about 1 where it is whole, and what lies behind
+//     would show through every pixel below 1;
 //   the last layer holds n = surfaces - (LAYERS - 1) surfaces, taken to share
 //     its sum equally: a = 1 - (1 - min(1, sum c / n))^n (exact for equal
 //     ones, less than independent unequal ones would cover);
@@ -25,6 +33,10 @@
 #ifndef LAYERS
 #define LAYERS 4
 #endif
+#ifndef CLOSE_MEAN  // injected from aniso3d/rendering/splat/params.py (AA_CLOSE)
+#define CLOSE_MEAN 0.9
+#define CLOSE_REACH 3.0
+#endif
 
 uniform sampler2D u_layer[LAYERS];
 uniform usampler2D u_surfaces;
@@ -33,21 +45,44 @@ uniform vec2 u_depth;          // (K, t0 - near): window depth = K (t - near) / 
 uniform float u_near;
 uniform float u_range;         // far - near
 uniform vec3 u_background;
+uniform float u_span;          // slices one surface spans (splat_surfaces.frag)
 uniform int u_mode;
 
 out vec4 f_color;
 
 // One layer of n surfaces (sampler arrays take constant indices only in GLSL
-// 3.30, so the loop over layers is unrolled below).
-void layer(vec4 acc, float n, inout vec3 colour, inout float trans) {
+// 3.30, so the loop over layers is unrolled below); is_whole: coverage 1.
+void layer(vec4 acc, float n, bool is_whole, inout vec3 colour, inout float trans) {
     if (acc.a > 0.0) {
-        float a = n > 1.0 ? 1.0 - pow(1.0 - min(acc.a / n, 1.0), n) : min(acc.a, 1.0);
+        float a = is_whole ? 1.0 : n > 1.0 ? 1.0 - pow(1.0 - min(acc.a / n, 1.0), n) : min(acc.a, 1.0);
         colour += trans * a * (acc.rgb / acc.a);
         trans *= 1.0 - a;
     }
 }
 
-#define LAYER(i) layer(texelFetch(u_layer[i], px, 0), i == LAYERS - 1 ? last : 1.0, colour, trans)
+#define LAYER(i) layer(texelFetch(u_layer[i], px, 0), i == LAYERS - 1 ? last : 1.0, false, colour, trans)
+
+// What a neighbour q adds to the whole-surface test: min(1, its first
+// layer's sum) where its nearest surface starts within CLOSE_REACH spans of
+// start, else 0 (and off the image).
+float neighbour(ivec2 q, ivec2 size, float start) {
+    if (any(lessThan(q, ivec2(0))) || any(greaterThanEqual(q, size))) return 0.0;
+    float c = texelFetch(u_layer[0], q, 0).a;
+    float s = float(texelFetch(u_surfaces, q, 0).w & 0xFFFFu);
+    return c > 0.0 && abs(s - start) < CLOSE_REACH * u_span ? min(c, 1.0) : 0.0;
+}
+
+// Whether the nearest surface, summing to own here and starting at slice
+// start, is whole (see the top). Four calls, not a loop over an array of
+// offsets: llvmpipe puts an indexed local array in memory.
+bool whole(ivec2 px, float own, float start) {
+    // Above 1 it is whole anyway; below 5 CLOSE_MEAN - 4 the neighbours cannot make it.
+    if (!(own >= 5.0 * CLOSE_MEAN - 4.0 && own < 1.0)) return false;
+    ivec2 size = textureSize(u_layer[0], 0);
+    float sum = own + neighbour(px + ivec2(1, 0), size, start) + neighbour(px - ivec2(1, 0), size, start)
+              + neighbour(px + ivec2(0, 1), size, start) + neighbour(px - ivec2(0, 1), size, start);
+    return sum >= 5.0 * CLOSE_MEAN;
+}
 
 void main() {
     ivec2 px = ivec2(gl_FragCoord.xy);
@@ -55,8 +90,10 @@ void main() {
     if (!(visible < 1.0)) discard;
     vec3 colour = vec3(0.0);
     float trans = 1.0;
-    float last = max(float(texelFetch(u_surfaces, px, 0).w >> 16) - float(LAYERS - 1), 1.0);
-    LAYER(0);
+    uint sw = texelFetch(u_surfaces, px, 0).w;
+    float last = max(float(sw >> 16) - float(LAYERS - 1), 1.0);
+    vec4 first = texelFetch(u_layer[0], px, 0);
+    layer(first, LAYERS == 1 ? last : 1.0, LAYERS > 1 && whole(px, first.a, float(sw & 0xFFFFu)), colour, trans);
 #if LAYERS > 1
     LAYER(1);
 #endif
@@ -74,9 +111,6 @@ void main() {
 #endif
 #if LAYERS > 6
     LAYER(6);
-#endif
-#if LAYERS > 7
-    LAYER(7);
 #endif
     if (!(trans < 1.0)) discard;
     if (u_mode == 0) {

@@ -9,15 +9,19 @@
 // which takes every occupied slice less than u_span beyond its start; the
 // next occupied slice starts the next (aniso3d/rendering/splat/reference.py
 // is the NumPy twin).
-// Out: f_surfaces, the first slices of surfaces 1 .. LAYERS - 1 (surface 0 is the
-// nearest), 16 bits each in x, y, z and the low half of w (0xFFFF where there
-// is no such surface), and the number of surfaces in the high half of w;
-// the mask is cleared on the way (for the next draw).
+// Out: f_surfaces, the first slices of surfaces 1 .. LAYERS - 1, 16 bits
+// each in x, y and z (0xFFFF where there is no such surface; LAYERS <= 7),
+// the first slice of surface 0 (the nearest) in the low half of w, and the
+// number of surfaces in its high half; the mask is cleared on the way (for
+// the next draw).
 #ifndef LAYERS
 #define LAYERS 4
 #endif
 #ifndef WORDS
 #define WORDS 16
+#endif
+#if LAYERS > 7
+#error at most 7 layers (their starts and surface 0's share 128 bits)
 #endif
 
 // Only pixels something was drawn in (the visibility depth below 1): the
@@ -44,6 +48,7 @@ void main() {
         if (skip > 0.0) w &= ~((1u << uint(ceil(skip))) - 1u);
         while (w != 0u) {
             int s = 32 * k + findLSB(w);
+            if (count == 0u) starts[6] = uint(s);
             if (count >= 1u && count < uint(LAYERS)) starts[count - 1u] = uint(s);
             count += 1u;
             limit = float(s) + u_span;

@@ -25,7 +25,7 @@ from aniso3d.rendering.camera import Camera
 from aniso3d.rendering.frame import FrameView
 from aniso3d.rendering.lighting import Lighting, shade_np
 from aniso3d.rendering.renderer import Renderer
-from aniso3d.rendering.splat import AA_LAYERS, SplatOptions
+from aniso3d.rendering.splat import AA_CLOSE, AA_LAYERS, SplatOptions
 from aniso3d.rendering.splat.reference import Fragments, composite_np, subpixel_fragments_np
 
 SIZE = (64, 64)
@@ -181,6 +181,47 @@ def test_surfaces_beyond_the_last_layer_share_it_equally():
     assert alpha == 1.0
 
 
+def image(coverage, depth, span: float = 2.0) -> np.ndarray:
+    """The twin's alpha of an image of one fragment per pixel: ``coverage``
+    and ``depth`` (in slices) (H, W) arrays, 0 coverage for none."""
+    coverage, depth = np.asarray(coverage, float), np.asarray(depth, float)
+    h, w = coverage.shape
+    at = np.flatnonzero(coverage.ravel() > 0)
+    frags = Fragments(at, coverage.ravel()[at], depth.ravel()[at], np.full((len(at), 3), 0.5), (w, h),
+                      (0.0, 1.0, span))  # fmt: skip
+    return composite_np(frags, WHITE)[1]
+
+
+def test_a_whole_surface_is_opaque_where_its_sums_scatter_about_one():
+    # Sub-pixel footprints do not tile a sheet exactly: its sums scatter
+    # about 1 (0.83 to 1.16 inside a minified blob). A pixel of 0.8 among
+    # neighbours of 1.1 on the same surface is whole; among neighbours of 0.3
+    # (a translucent sheet), at an edge (two neighbours empty), or among
+    # neighbours on another surface (farther than AA_CLOSE's reach), it
+    # keeps its sum; below 5 mean - 4 (0.5) it is a hole, and keeps it.
+    mean, reach = AA_CLOSE
+    cover = np.full((5, 5), 1.1)
+    cover[2, 2] = 0.8
+    depth = np.full((5, 5), 10.5)
+    assert image(cover, depth)[2, 2] == 1.0
+    assert image(np.where(cover > 1, 0.3, cover), depth)[2, 2] == pytest.approx(0.8, abs=1e-12)
+    edge = cover.copy()
+    edge[:, 3:] = 0.0
+    assert image(edge, depth)[2, 2] == pytest.approx(0.8, abs=1e-12)
+    far = depth.copy()
+    far[[1, 3, 2, 2], [2, 2, 1, 3]] += 2.0 * reach + 1.0  # the four neighbours, another surface
+    assert image(cover, far)[2, 2] == pytest.approx(0.8, abs=1e-12)
+    hole = cover.copy()
+    hole[2, 2] = 5.0 * mean - 4.0 - 0.05
+    assert image(hole, depth)[2, 2] == pytest.approx(hole[2, 2], abs=1e-12)
+    # The mean is over min(1, sum): two full neighbours and two of 0.5 do not
+    # make it whole, however far above 1 the full ones sum.
+    big = np.where(cover > 1, 5.0, cover)
+    big[2, 1] = big[2, 3] = 0.5
+    assert (0.8 + 2.0 + 1.0) / 5.0 < mean
+    assert image(big, depth)[2, 2] == pytest.approx(0.8, abs=1e-12)
+
+
 def test_twin_fragments_keep_the_projected_area():
     # The twin's fragments of a tiled sheet sum to the sheet's projected area,
     # its coverage in the pixels inside is 1, and depths are the sheet's.
@@ -243,13 +284,18 @@ def test_translucent_sheets_compose_as_independent_layers(r):
     inside = img[20:44, 20:44, 3]
     assert abs(float(inside.mean()) - (1.0 - 0.7**5)) < 0.01, inside.mean()
     # The same sheets 1e-4 apart, well within one surface's span, are one
-    # surface: each pixel reads min(1, its summed coverage), 1.5 on average.
+    # surface: each pixel reads min(1, its summed coverage), 1.5 on average,
+    # or 1 where the surface is whole (its sum and its neighbours' high).
     close = merge(*(PointCloud(s.positions * [1, 1, 0] + [0, 0, -1e-4 * k], s.normals, s.areas, s.kd, s.ks,
                                s.shininess) for k, s in enumerate(sheets)))  # fmt: skip
     img, view = draw_float(r, close)
     frags = subpixel_fragments_np(close, view, SplatOptions(quality="high"))
     total = np.bincount(frags.pixel, frags.coverage, SIZE[0] * SIZE[1]).reshape(SIZE[::-1])
-    assert np.abs(img[..., 3] - np.minimum(total, 1.0)).max() < TOL
+    _, alpha = composite_np(frags, view.lighting.background)
+    assert np.abs(img[..., 3] - alpha).max() < TOL
+    whole = alpha > np.minimum(total, 1.0) + 1e-9
+    assert np.all(alpha[whole] == 1.0) and np.all(total[whole] >= 5.0 * AA_CLOSE[0] - 4.0 - 1e-9)
+    assert np.abs(img[~whole][..., 3] - np.minimum(total[~whole], 1.0)).max() < TOL
     assert float(img[20:44, 20:44, 3].mean()) > 0.97
 
 
@@ -289,6 +335,21 @@ def test_gpu_matches_the_twin_on_random_clouds(r, seed):
 
 
 @pytest.mark.gpu
+def test_a_jittered_opaque_sheet_hides_the_sheet_behind_it(r):
+    # A red sheet tiled by sub-pixel splats 1 px apart, each jittered by up to
+    # 0.1 px: its sums scatter about 1 (0.82 to 1.26 inside, as a minified
+    # blob's 0.83 to 1.16), and the blue sheet behind showed through every
+    # pixel below 1 (the speckle on a minified blob). Whole inside now: no
+    # blue, red alone has alpha 1; the twin's pixel by pixel.
+    red = sheet(0.0, (1.0, 0.0, 0.0), spacing_px=1.0, jitter=0.1, seed=4)
+    blue = sheet(-0.5, (0.0, 0.0, 1.0))
+    img = assert_matches_twin(r, merge(red, blue))
+    assert float(img[12:52, 12:52, 2].max()) < 1e-6
+    alone = assert_matches_twin(r, red)
+    assert np.abs(alone[12:52, 12:52, 3] - 1.0).max() < 1e-6
+
+
+@pytest.mark.gpu
 def test_a_tilted_tiled_plane_stays_opaque(r):
     # A plane tiled by sub-pixel splats (0.5 px apart), tilted 60 degrees: its
     # fragments in a pixel spread over more depth than a surface spans, but
@@ -308,7 +369,8 @@ def test_a_tilted_tiled_plane_stays_opaque(r):
     frags = subpixel_fragments_np(plane, view, SplatOptions(quality="high"))
     total = np.bincount(frags.pixel, frags.coverage, SIZE[0] * SIZE[1]).reshape(SIZE[::-1])
     inside = (slice(27, 37), slice(16, 48))
-    # One surface: alpha is the summed coverage (1 up to the tilted boxes'
-    # tiling, within 0.2 %), not 1 - prod(1 - a) over pieces.
-    assert np.abs(img[inside][..., 3] - np.minimum(total[inside], 1.0)).max() < TOL
+    # One surface: alpha is at least the summed coverage (1 up to the tilted
+    # boxes' tiling, within 0.2 %; 1 where the surface is whole), not
+    # 1 - prod(1 - a) over pieces.
+    assert np.all(img[inside][..., 3] >= np.minimum(total[inside], 1.0) - TOL)
     assert float(img[inside][..., 3].min()) > 0.998

@@ -29,6 +29,7 @@ from aniso3d.rendering.splat.culling import depth_range, large_blocks
 from aniso3d.rendering.splat.geometry import mask_slicing
 from aniso3d.rendering.splat.options import SplatOptions
 from aniso3d.rendering.splat.params import (
+    AA_CLOSE,
     AA_FILTER,
     AA_LAYERS,
     AA_PLANE_REACH,
@@ -156,7 +157,10 @@ class SplatPipeline:
         """A full-screen pass: one triangle, no vertex buffer (``aa``: a pass
         of quality "high", with its defines; ``far``: the triangle at the far
         plane, for an early depth test)."""
-        defines: dict[str, object] = {"LAYERS": AA_LAYERS, "WORDS": AA_SLICES // 32} if aa else {}
+        defines: dict[str, object] = {}
+        if aa:
+            mean, reach_ = (float(x) for x in AA_CLOSE)
+            defines = {"LAYERS": AA_LAYERS, "WORDS": AA_SLICES // 32, "CLOSE_MEAN": mean, "CLOSE_REACH": reach_}
         if far:
             defines["FAR"] = 1
         prog = self.gl.program("splat_resolve.vert", fragment, defines=defines)

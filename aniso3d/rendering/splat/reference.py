@@ -21,7 +21,12 @@ fraction of the pixel a splat covers; linear depth z; colour):
 5. Within a surface splats tile it, so coverages add: a = min(1, sum c); the
    last layer's n surfaces are taken to share its sum equally,
    a = 1 - (1 - min(1, sum c / n))^n. Its colour is the coverage-weighted
-   mean of its fragments' colours.
+   mean of its fragments' colours. The nearest surface is whole (a = 1)
+   where the mean of min(1, sum) over the pixel and its four neighbours
+   reaches ``mean`` (:data:`~aniso3d.rendering.splat.params.AA_CLOSE`),
+   a neighbour counting where its nearest surface starts less than ``reach``
+   spans from this one's (0 otherwise, and off the image): sub-pixel
+   footprints do not tile a sheet exactly, so its sums scatter about 1.
 6. Surfaces hide each other at random, front to back: with T the
    transmittance left (1 at first), a layer adds T a times its colour and
    T *= 1 - a, so an opaque layer hides everything behind it, and
@@ -42,7 +47,7 @@ from aniso3d.rendering.frame import FrameView
 from aniso3d.rendering.lighting import shade_np
 from aniso3d.rendering.splat.geometry import mask_slicing
 from aniso3d.rendering.splat.options import SplatOptions
-from aniso3d.rendering.splat.params import AA_FILTER, AA_LAYERS, AA_PLANE_REACH, AA_REGIME, AA_SLICES
+from aniso3d.rendering.splat.params import AA_CLOSE, AA_FILTER, AA_LAYERS, AA_PLANE_REACH, AA_REGIME, AA_SLICES
 
 #: Fragments covering less of their pixel than this are dropped (splat.frag).
 MIN_COVERAGE = 1e-4
@@ -195,6 +200,30 @@ def surfaces_np(pixel: np.ndarray, slice_index: np.ndarray, n_pixels: int, span:
     return starts_arr, np.isfinite(starts_arr).sum(axis=1)
 
 
+def _shifted(a: np.ndarray, dy: int, dx: int, fill: float) -> np.ndarray:
+    """``a`` (H, W) moved by (dy, dx) pixels: out[y, x] = a[y - dy, x - dx],
+    ``fill`` where that lies off the image."""
+    h, w = a.shape
+    out = np.full_like(a, fill)
+    to = (slice(max(dy, 0), h + min(dy, 0)), slice(max(dx, 0), w + min(dx, 0)))
+    out[to] = a[max(-dy, 0) : h - max(dy, 0), max(-dx, 0) : w - max(dx, 0)]
+    return out
+
+
+def closed_np(own: np.ndarray, start: np.ndarray, span: float) -> np.ndarray:
+    """(H, W) bool: where the nearest surface is whole (rule step 5), from its
+    sum of coverages ``own`` (H, W) and first slice ``start`` (H, W; inf
+    where the pixel holds nothing)."""
+    min_mean, reach = AA_CLOSE
+    total = np.minimum(own, 1.0)
+    for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        c, s = _shifted(own, dy, dx, 0.0), _shifted(start, dy, dx, np.inf)
+        with np.errstate(invalid="ignore"):
+            same = (c > 0) & (np.abs(s - start) < reach * span)
+        total += np.where(same, np.minimum(c, 1.0), 0.0)
+    return (own < 1.0) & (total >= 5.0 * min_mean)
+
+
 def composite_np(
     frags: Fragments, background=(1.0, 1.0, 1.0), layers: int = AA_LAYERS
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -214,6 +243,7 @@ def composite_np(
     colour = np.zeros((w * h, layers, 3))
     np.add.at(total, (pixel, layer), c)
     np.add.at(colour, (pixel, layer), rgb * c[:, None])
+    whole = closed_np(total[:, 0].reshape(h, w), starts[:, 0].reshape(h, w), span).ravel() & (layers > 1)
     out = np.zeros((w * h, 3))
     trans = np.ones(w * h)
     last = np.maximum(count - (layers - 1), 1).astype(np.float64)
@@ -221,6 +251,8 @@ def composite_np(
         a_sum = total[:, k]
         n = last if k == layers - 1 else np.ones(w * h)
         a = np.where(n > 1, 1.0 - (1.0 - np.minimum(a_sum / n, 1.0)) ** n, np.minimum(a_sum, 1.0))
+        if k == 0:
+            a = np.where(whole, 1.0, a)
         mean = np.divide(colour[:, k], a_sum[:, None], out=np.zeros((w * h, 3)), where=a_sum[:, None] > 0)
         out += (trans * a)[:, None] * mean
         trans *= 1.0 - a
