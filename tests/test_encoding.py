@@ -537,3 +537,23 @@ def test_a_coarse_residual_is_never_worse_than_none(tree_tex, bits):
     got = tree_tex.as_stored(Bits(density=bits)).density
     assert np.all(np.abs(got - d) <= np.abs(f - d) + 1e-12)
     assert np.any(np.abs(got - d) < np.abs(f - d) - 1e-9)  # and it does store something
+
+
+def test_version_2_compact_file_still_loads():
+    """tests/data/small_tree_v2.a3d was written by the version 2 compact
+    writer (deflated quantised members), and small_tree_v2_decoded.a3d (exact
+    encoding) holds what that writer's decoder gave for it: a later format
+    must still decode the old file to exactly those arrays."""
+    f = read_texture_file(DATA / "small_tree_v2.a3d")
+    assert f.version == 2 and f.encoding == "compact"
+    ref = read_texture_file(DATA / "small_tree_v2_decoded.a3d")
+    assert ref.version == 2 and ref.encoding == "exact"
+    for name in ARRAYS:
+        a, b = f.arrays[name], ref.arrays[name]
+        assert a.dtype == b.dtype and a.shape == b.shape, name
+        np.testing.assert_array_equal(a, b, err_msg=name)
+    back = AnisoTexture.load(DATA / "small_tree_v2.a3d")
+    assert back.meta[QUANTISED] and back.meta["source"] == "v2-fixture"
+    built = build_texture(scenes.tree(levels=3, leaves_per_twig=12), 10, 16)
+    assert back.n_entries == built.n_entries and np.array_equal(back.coords, built.coords)
+    assert back.total_area() == pytest.approx(built.total_area(), rel=0.01)
