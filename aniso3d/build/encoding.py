@@ -73,10 +73,33 @@ ARRAYS = ("origin", "shape", "coords", "directions", "density", "entry_offsets",
           "entry_direction", "entry_area", "entry_kd", "entry_ks", "entry_shininess",
           "entry_centroid", "entry_normal")  # fmt: skip
 
-#: The members of the compact encoding, in the order they are written.
-MEMBERS = ("origin", "shape", "directions", "coords", "entry_mask", "entry_area",
-           "entry_normal", "entry_coherence", "entry_centroid", "entry_kd", "entry_ks",
-           "entry_shininess", "density")  # fmt: skip
+#: The members of the compact encoding of format version 2, in the order they are written.
+MEMBERS_V2 = ("origin", "shape", "directions", "coords", "entry_mask", "entry_area",
+              "entry_normal", "entry_coherence", "entry_centroid", "entry_kd", "entry_ks",
+              "entry_shininess", "density")  # fmt: skip
+#: The members of the compact encoding (format version 3): version 2's and
+#: ``entry_parent``, which lets an entry take its normal and materials from a
+#: neighbour's (:func:`_copy_parents`); the fields it names are then stored
+#: for the other entries only.
+MEMBERS = (*MEMBERS_V2[:5], "entry_parent", *MEMBERS_V2[5:])
+#: Fields (members) an entry with a parent copies from it instead of storing.
+COPIED = ("entry_normal", "entry_coherence", "entry_kd", "entry_ks", "entry_shininess")
+
+#: The field of :class:`Bits` each copied member's codes have.
+_BITS_OF = {"entry_normal": "normal", "entry_coherence": "coherence", "entry_kd": "kd", "entry_ks": "ks",
+            "entry_shininess": "shininess"}  # fmt: skip
+
+#: The 13 neighbours (di, dj, dk) of a voxel that come before it in cell-key
+#: order (faces first, then edges, then corners): ``entry_parent`` j > 0
+#: names the entry with the same sample direction in the voxel at
+#: ``PARENT_OFFSETS[j - 1]`` from the entry's own.
+PARENT_OFFSETS = np.array(
+    sorted(
+        ((i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1) if (i, j, k) < (0, 0, 0)),
+        key=lambda o: (abs(o[0]) + abs(o[1]) + abs(o[2]), [-x for x in o[::-1]]),
+    ),
+    dtype=np.int64,
+)
 
 #: Areas below ``max area / 2**AREA_SPAN`` are stored as that (an absolute
 #: error below 6e-8 of the largest entry's area): keeps the log range, and so
@@ -107,10 +130,11 @@ class Bits:
     ks: int = 8
     shininess: int = 8
     density: int = 3
+    depth: int = 8
 
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():
-            low = 0 if name == "density" else 2 if name in ("area", "normal", "centroid") else 1
+            low = 0 if name == "density" else 2 if name in ("area", "normal", "centroid", "depth") else 1
             if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= 16:
                 raise InputError(f"bits for '{name}' must be a whole number in {low}..16, got {value!r}")
 
@@ -297,13 +321,18 @@ def _deflated(codes: np.ndarray, bits: int) -> int:
     return len(zlib.compress(to_planes(codes, _width(bits)).tobytes()))
 
 
+def _decode_unit_normal(codes: np.ndarray, bits: Bits, span: float | None, sample: np.ndarray) -> np.ndarray:
+    """(E, 3) float64 unit normals from their direction codes (2, E)."""
+    return _decode_oct(codes, oct_bits(bits)) if span is None else _decode_frame(codes, sample, bits.normal, span)
+
+
 def _decode_normal(codes: np.ndarray, length: np.ndarray, length_range: list, bits: Bits, span: float | None,
                    sample: np.ndarray) -> np.ndarray:  # fmt: skip
     """(E, 3) float32 mean normals from their direction codes (2, E), in the
     sample frame (``span``) or octahedral (``span`` None), and length codes
     (1, E) on ``length_range``. float32 as built; F is computed from these
     very values by encoder and decoder, so that decoded D >= F exactly."""
-    unit = _decode_oct(codes, oct_bits(bits)) if span is None else _decode_frame(codes, sample, bits.normal, span)
+    unit = _decode_unit_normal(codes, bits, span, sample)
     scale = _decode_range(np.atleast_2d(length), bits.coherence, length_range)[0]
     return (unit * scale[:, None]).astype(np.float32)
 
@@ -370,6 +399,76 @@ def _decode_centroid(codes, origin, voxel_size, coords, voxel, bits) -> np.ndarr
     return origin + (coords[voxel] + f) * voxel_size
 
 
+def _steps(bits: int) -> tuple[int, int]:
+    """(m, s) of a signed coordinate in the centroid's normal frame: codes
+    ``m + round(x s)`` in 0..2m for x in [-sqrt(3)/2, sqrt(3)/2] (a voxel's
+    half diagonal), ``m = 2**(bits-1) - 1`` and ``s`` the largest even number
+    with ``s sqrt(3)/2 <= m``: 0 and +-1/2 (the voxel's middle and faces)
+    are exact."""
+    m = 2 ** (bits - 1) - 1
+    return m, 2 * math.floor(m / math.sqrt(3.0))
+
+
+def _frame_offsets(codes: np.ndarray, unit: np.ndarray, bits: Bits) -> np.ndarray:
+    """(E, 3) offsets from the voxel centre, in voxels, of centroid codes
+    (3, E) (depth along the unit normal, then the two tangent coordinates
+    of :func:`~aniso3d.grid.tangent_frame`), clamped into the voxel."""
+    md, sd = _steps(bits.depth)
+    mp, sp = _steps(bits.centroid)
+    t, b = tangent_frame(unit)
+    d = (codes[0].astype(np.float64) - md) / sd
+    u = (codes[1].astype(np.float64) - mp) / sp
+    v = (codes[2].astype(np.float64) - mp) / sp
+    return np.clip(d[:, None] * unit + u[:, None] * t + v[:, None] * b, -0.5, 0.5)
+
+
+def _depth_codes(f: np.ndarray, unit: np.ndarray, bits: int) -> np.ndarray:
+    """Depth codes (E,) int64 of offsets ``f`` (E, 3) from the voxel centre along ``unit`` (E, 3)."""
+    m, s = _steps(bits)
+    return m + np.clip(np.round(np.sum(f * unit, axis=1) * s), -m, m).astype(np.int64)
+
+
+def _encode_centroid_frame(centroid, origin, voxel_size, coords, voxel, unit, parent_src, bits) -> np.ndarray:
+    """(3, E) codes of each centroid in its entry's normal frame (version 3):
+    its offset from the voxel centre along the decoded unit normal ``unit``
+    (``bits.depth`` bits, within h sqrt(3) / 4 s), and in the plane
+    (``bits.centroid`` bits a coordinate). Depth is what the volume's sheets
+    and the splats' depth need; the tangent coordinates only slide a splat
+    in its plane. An entry with a parent (``parent_src``, its source entry, is
+    not itself) lies on its source's plane when their facets are coplanar
+    (a leaf across voxels): its depth is stored as the difference, modulo
+    ``2**bits.depth``, from the depth of that plane in its voxel."""
+    f = (np.asarray(centroid, dtype=np.float64) - origin) / voxel_size - coords[voxel] - 0.5
+    f = np.clip(f, -0.5, 0.5)
+    mp, sp = _steps(bits.centroid)
+    t, b = tangent_frame(unit)
+    codes = np.empty((3, len(f)), dtype=np.int64)
+    codes[0] = _depth_codes(f, unit, bits.depth)
+    codes[1] = mp + np.clip(np.round(np.sum(f * t, axis=1) * sp), -mp, mp)
+    codes[2] = mp + np.clip(np.round(np.sum(f * b, axis=1) * sp), -mp, mp)
+    child = np.flatnonzero(parent_src != np.arange(len(f)))
+    if len(child):
+        root = parent_src[child]
+        # The sources' centroids as decoded, seen from each child's voxel.
+        at = _frame_offsets(codes[:, root], unit[root], bits) + coords[voxel[root]] - coords[voxel[child]]
+        codes[0, child] = (codes[0, child] - _depth_codes(at, unit[child], bits.depth)) % 2**bits.depth
+    return codes.astype(np.uint16)
+
+
+def _decode_centroid_frame(codes, origin, voxel_size, coords, voxel, unit, parent_src, bits) -> np.ndarray:
+    codes = codes.astype(np.int64)
+    child = np.flatnonzero(parent_src != np.arange(codes.shape[1]))
+    if len(child):
+        root = parent_src[child]
+        at = _frame_offsets(codes[:, root], unit[root], bits) + coords[voxel[root]] - coords[voxel[child]]
+        codes[0, child] = (codes[0, child] + _depth_codes(at, unit[child], bits.depth)) % 2**bits.depth
+    md, _ = _steps(bits.depth)
+    mp, _ = _steps(bits.centroid)
+    if codes.size and (int(codes[0].max()) > 2 * md or int(codes[1:].max()) > 2 * mp):
+        raise FormatError("entry_centroid holds codes past the voxel")
+    return origin + (coords[voxel] + 0.5 + _frame_offsets(codes, unit, bits)) * voxel_size
+
+
 def facet_density(area: np.ndarray, normal: np.ndarray, offsets: np.ndarray, directions: np.ndarray) -> np.ndarray:
     """(M, K) float64 ``F_v(p) = sum_e A_e |n_e . N_p|`` over each voxel's
     entries: the density sphere as far as the entries' areas (E,) and mean
@@ -392,6 +491,78 @@ def _add_rows(out: np.ndarray, rows: np.ndarray, values: np.ndarray) -> None:
     """``out[rows] += values`` for sorted ``rows`` with repeats (reduceat, not add.at)."""
     starts = np.flatnonzero(np.diff(rows, prepend=-1))
     out[rows[starts]] += np.add.reduceat(values, starts, axis=0)
+
+
+# ------------------------------------------------------------ copy prediction
+
+
+def _entry_keys(coords: np.ndarray, shape: np.ndarray, voxel: np.ndarray, direction: np.ndarray, k: int):
+    """(E,) int64 ``cell key * K + sample direction`` of each entry: sorted,
+    as entries are sorted by cell and then by direction."""
+    return cell_keys(coords, shape)[voxel] * k + np.asarray(direction, dtype=np.int64)
+
+
+def _neighbour_entries(coords, shape, voxel, direction, k, ekeys, offset, which=None) -> np.ndarray:
+    """(E,) (or (len(which),)) index of the entry with the same sample
+    direction in the voxel at ``offset`` from each entry's, -1 where there is none."""
+    sel = slice(None) if which is None else which
+    cell = coords[voxel[sel]] + offset
+    inside = np.all((cell >= 0) & (cell < shape), axis=1)
+    key = cell_keys(np.clip(cell, 0, shape - 1), shape) * k + np.asarray(direction, dtype=np.int64)[sel]
+    i = np.minimum(np.searchsorted(ekeys, key), max(len(ekeys) - 1, 0))
+    hit = inside & (ekeys[i] == key) if len(ekeys) else np.zeros(len(key), bool)
+    return np.where(hit, i, -1)
+
+
+def _copy_parents(coords, shape, voxel, direction, k, fields: list[np.ndarray]) -> np.ndarray:
+    """(E,) uint8 ``entry_parent``: j > 0 when the entry's codes of every
+    array of ``fields`` (each (R, E)) equal those of the entry with the same
+    sample direction in the voxel at ``PARENT_OFFSETS[j - 1]`` (the first such
+    neighbour), else 0. A leaf or a blade crossing several voxels leaves
+    entries with the same normal and material in each: all but the first
+    copy theirs. Neighbours come earlier in cell order, so parents form a forest."""
+    e = len(direction)
+    ekeys = _entry_keys(coords, shape, voxel, direction, k)
+    codes = np.vstack([np.atleast_2d(f) for f in fields]) if fields else np.zeros((0, e))
+    parent = np.zeros(e, dtype=np.uint8)
+    for j, offset in enumerate(PARENT_OFFSETS, start=1):
+        open_ = np.flatnonzero(parent == 0)
+        if not len(open_):
+            break
+        nb = _neighbour_entries(coords, shape, voxel, direction, k, ekeys, offset, open_)
+        has = nb >= 0
+        cand, nb = open_[has], nb[has]
+        same = np.all(codes[:, cand] == codes[:, nb], axis=0)
+        parent[cand[same]] = j
+    return parent
+
+
+def _copy_sources(parent: np.ndarray, coords, shape, voxel, direction, k) -> np.ndarray:
+    """(E,) index of the entry whose stored codes each entry takes: itself
+    when ``parent`` is 0, else its parent's source (pointer jumping: about
+    log2 of the longest chain of NumPy passes). Raises FormatError for a
+    parent that names no entry."""
+    e = len(parent)
+    src = np.arange(e, dtype=np.int64)
+    if e and int(parent.max()) > len(PARENT_OFFSETS):
+        raise FormatError(f"entry_parent holds codes above {len(PARENT_OFFSETS)}")
+    child = np.flatnonzero(parent)
+    if not len(child):
+        return src
+    ekeys = _entry_keys(coords, shape, voxel, direction, k)
+    nb = np.empty(len(child), dtype=np.int64)
+    pj = parent[child].astype(np.int64) - 1
+    for j in np.unique(pj):
+        sel = np.flatnonzero(pj == j)
+        nb[sel] = _neighbour_entries(coords, shape, voxel, direction, k, ekeys, PARENT_OFFSETS[j], child[sel])
+    if np.any(nb < 0):
+        raise FormatError("entry_parent names a neighbour without an entry in that sample direction")
+    src[child] = nb
+    while True:  # parents come earlier, so this ends (each pass halves every chain)
+        nxt = src[src]
+        if np.array_equal(nxt, src):
+            return src
+        src = nxt
 
 
 # ------------------------------------------------------------------- the whole
@@ -482,14 +653,24 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
         "entry_area": to_planes(area_codes, _width(bits.area)),
         "entry_normal": to_planes(normal_codes, _width(bits.normal)),
         "entry_coherence": to_planes(coherence_codes, _width(bits.coherence)),
-        "entry_centroid": to_planes(
-            _encode_centroid(arrays["entry_centroid"], origin, float(voxel_size), coords, voxel, bits.centroid),
-            _width(bits.centroid),
-        ),
         "entry_kd": to_planes(kd_codes, _width(bits.kd)),
         "entry_ks": to_planes(ks_codes, _width(bits.ks)),
         "entry_shininess": to_planes(sh_codes, _width(bits.shininess)),
     }
+    direction = np.asarray(arrays["entry_direction"], dtype=np.int64)
+    copied = {"entry_normal": normal_codes, "entry_coherence": coherence_codes, "entry_kd": kd_codes,
+              "entry_ks": ks_codes, "entry_shininess": sh_codes}  # fmt: skip
+    parent = _copy_parents(coords, shape, voxel, direction, k, [copied[n] for n in COPIED])
+    members["entry_parent"] = parent
+    src = _copy_sources(parent, coords, shape, voxel, direction, k)
+    unit_dec = _decode_unit_normal(normal_codes, bits, span, sample)
+    centroid_codes = _encode_centroid_frame(arrays["entry_centroid"], origin, float(voxel_size), coords, voxel,
+                                            unit_dec, src, bits)  # fmt: skip
+    members["entry_centroid"] = to_planes(centroid_codes, _width(max(bits.centroid, bits.depth)))
+    roots = parent == 0
+    for n in COPIED:
+        members[n] = to_planes(np.atleast_2d(copied[n])[:, roots], _width(getattr(bits, _BITS_OF[n])))
+    members = {n: members[n] for n in MEMBERS if n in members}
     if bits.density:
         # The residual against F of the *decoded* entries: what decode adds back.
         area = _decode_log(area_codes, bits.area, area_span)
@@ -503,7 +684,8 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
     return members, params
 
 
-def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float) -> dict[str, np.ndarray]:
+def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, version: int = 3
+           ) -> dict[str, np.ndarray]:
     """The texture arrays (every name of :data:`ARRAYS`, dtypes as
     :func:`~aniso3d.build.texture.build_texture` makes them) of a compact
     encoding. Raises :class:`~aniso3d.errors.FormatError` naming what does
@@ -543,24 +725,41 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float) -> d
     e = len(direction)
     voxel = np.repeat(np.arange(m), np.diff(offsets))
 
+    if version >= 3:
+        parent = _uint8(members, "entry_parent", (e,))
+        src = _copy_sources(parent, coords.astype(np.int64), shape, voxel, direction, k)
+        # A copied member holds the codes of entries without a parent, in
+        # order: entry i takes row rank[src[i]] of it.
+        roots = parent == 0
+        n_roots = int(roots.sum())
+        take = (np.cumsum(roots) - 1)[src]
+    else:
+        take, src = None, None
+
     def codes(name: str, rows: int, b: int) -> np.ndarray:
-        planes = _uint8(members, name, (rows * _width(b), e))
+        copied = take is not None and name in COPIED
+        planes = _uint8(members, name, (rows * _width(b), n_roots if copied else e))
         c = from_planes(planes, rows, _width(b))
         if c.size and int(c.max()) >= 2**b:
             raise FormatError(f"{name} holds codes above {b} bits")
-        return c
+        return c[:, take] if copied else c
 
     area = _decode_log(codes("entry_area", 1, bits.area)[0], bits.area, area_span)
     nb = bits.normal if span is not None else oct_bits(bits)
     normal = _decode_normal(codes("entry_normal", 2, nb), codes("entry_coherence", 1, bits.coherence),
                             ranges["coherence"], bits, span, dirs[direction])  # fmt: skip
-    centroid_codes = codes("entry_centroid", 3, bits.centroid)
-    if centroid_codes.size and int(centroid_codes.max()) > 2**bits.centroid - 2:
-        raise FormatError("entry_centroid holds codes past the voxel")
-    centroid = _decode_centroid(
-        centroid_codes, origin, float(voxel_size), coords.astype(np.int64), voxel,
-        bits.centroid,
-    )  # fmt: skip
+    if version >= 3:
+        unit = _decode_unit_normal(codes("entry_normal", 2, nb), bits, span, dirs[direction])
+        centroid = _decode_centroid_frame(codes("entry_centroid", 3, max(bits.centroid, bits.depth)), origin,
+                                          float(voxel_size), coords.astype(np.int64), voxel, unit, src, bits)  # fmt: skip
+    else:
+        centroid_codes = codes("entry_centroid", 3, bits.centroid)
+        if centroid_codes.size and int(centroid_codes.max()) > 2**bits.centroid - 2:
+            raise FormatError("entry_centroid holds codes past the voxel")
+        centroid = _decode_centroid(
+            centroid_codes, origin, float(voxel_size), coords.astype(np.int64), voxel,
+            bits.centroid,
+        )  # fmt: skip
     kd = _decode_range(codes("entry_kd", 3, bits.kd), bits.kd, ranges["kd"]).T
     ks = _decode_range(codes("entry_ks", 1, bits.ks), bits.ks, ranges["ks"])[0]
     sh = _decode_range(codes("entry_shininess", 1, bits.shininess), bits.shininess, ranges["shininess"], log=True)[0]

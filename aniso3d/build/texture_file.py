@@ -37,7 +37,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-from aniso3d.build.encoding import ARRAYS, DEFAULT_BITS, MEMBERS, Bits, decode, encode
+from aniso3d.build.encoding import ARRAYS, DEFAULT_BITS, MEMBERS, MEMBERS_V2, Bits, decode, encode
 from aniso3d.build.mesh import check_readable_file
 from aniso3d.errors import FormatError, InputError
 from aniso3d.files import atomic_write
@@ -47,7 +47,7 @@ __all__ = ["ARRAYS", "ENCODINGS", "FORMAT_NAME", "FORMAT_VERSION", "TextureFile"
 
 FORMAT_NAME = "aniso3d-texture"
 #: The version written; every version from 1 up to it is read.
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 #: The encodings of version 2: quantised (default) or the arrays as they are.
 ENCODINGS = ("compact", "exact")
 REBUILD = "rebuild it from its mesh ('aniso3d build MESH -o out.a3d')"
@@ -127,8 +127,9 @@ def _write_zip(fh: BinaryIO, members: dict[str, np.ndarray], header: dict) -> No
     # Streamed into the file: no second copy of the arrays in memory.
     with zipfile.ZipFile(fh, "w") as zf:
         zf.writestr(_member("header.json"), json.dumps(header, indent=1))
+        lzma = header["encoding"] == "compact"
         for n, a in members.items():
-            with zf.open(_member(n + ".npy", deflate=True), "w", force_zip64=a.nbytes > 2**30) as out:
+            with zf.open(_member(n + ".npy", deflate=True, lzma=lzma), "w", force_zip64=a.nbytes > 2**30) as out:
                 np.save(out, a, allow_pickle=False)
 
 
@@ -170,7 +171,7 @@ def read_texture_file(path: str | os.PathLike) -> TextureFile:
                 )
             if not isinstance(params, dict):
                 raise FormatError(f"'{p}' has a damaged header: params is not an object; {REBUILD}")
-        names = ARRAYS if encoding == "exact" else _compact_members(params)
+        names = ARRAYS if encoding == "exact" else _compact_members(params, version)
         members = {}
         for n in names:
             try:
@@ -193,7 +194,7 @@ def read_texture_file(path: str | os.PathLike) -> TextureFile:
         raise FormatError(f"'{p}' has a damaged header: meta is not an object; {REBUILD}")
     if encoding == "compact":
         try:
-            arrays = decode(members, params, float(voxel_size))
+            arrays = decode(members, params, float(voxel_size), version)
         except FormatError as exc:
             raise FormatError(f"'{p}' is damaged: {exc}; {REBUILD}") from None
     else:
@@ -201,21 +202,23 @@ def read_texture_file(path: str | os.PathLike) -> TextureFile:
     return TextureFile(arrays, float(voxel_size), meta, version, encoding)
 
 
-def _compact_members(params: dict) -> tuple[str, ...]:
-    """The members a compact file must hold: all of :data:`MEMBERS`, but
-    ``density`` only when its residual is stored."""
+def _compact_members(params: dict, version: int) -> tuple[str, ...]:
+    """The members a compact file of ``version`` must hold: all of
+    :data:`MEMBERS` (version 2: :data:`MEMBERS_V2`), but ``density`` only
+    when its residual is stored."""
     bits = params.get("bits")
     stored = not isinstance(bits, dict) or bits.get("density", 1) != 0
-    return tuple(n for n in MEMBERS if n != "density" or stored)
+    return tuple(n for n in (MEMBERS if version >= 3 else MEMBERS_V2) if n != "density" or stored)
 
 
-def _member(name: str, deflate: bool = False) -> zipfile.ZipInfo:
+def _member(name: str, deflate: bool = False, lzma: bool = False) -> zipfile.ZipInfo:
     """A zip entry with a fixed timestamp (and zlib's default level when
-    deflated), so equal textures give equal files."""
+    deflated, LZMA's default preset with ``lzma``), so equal textures give
+    equal files."""
     info = zipfile.ZipInfo(name, date_time=(1980, 1, 1, 0, 0, 0))
     info.external_attr = 0o600 << 16
     if deflate:
-        info.compress_type = zipfile.ZIP_DEFLATED
+        info.compress_type = zipfile.ZIP_LZMA if lzma else zipfile.ZIP_DEFLATED
     return info
 
 
