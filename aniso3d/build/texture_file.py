@@ -28,6 +28,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import lzma
 import os
 import zipfile
 import zlib
@@ -150,7 +151,7 @@ def read_texture_file(path: str | os.PathLike) -> TextureFile:
             header = json.loads(zf.read("header.json"))
         except KeyError:
             raise FormatError(f"'{p}' is a zip file but not an aniso3d texture (no header.json)") from None
-        except (ValueError, zipfile.BadZipFile, OSError, EOFError, zlib.error) as exc:
+        except (ValueError, zipfile.BadZipFile, OSError, EOFError, zlib.error, lzma.LZMAError) as exc:
             raise FormatError(f"'{p}' has a damaged header: {exc}; {REBUILD}") from None
         if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:
             got = header.get("format") if isinstance(header, dict) else type(header).__name__
@@ -181,7 +182,7 @@ def read_texture_file(path: str | os.PathLike) -> TextureFile:
                     members[n] = np.lib.format.read_array(member, allow_pickle=False)
             except KeyError:
                 raise FormatError(f"'{p}' is missing array '{n}'; the file is damaged: {REBUILD}") from None
-            except (ValueError, zipfile.BadZipFile, OSError, EOFError, zlib.error) as exc:
+            except (ValueError, zipfile.BadZipFile, OSError, EOFError, zlib.error, lzma.LZMAError) as exc:
                 raise FormatError(f"'{p}' is damaged ({type(exc).__name__}: {exc}); {REBUILD}") from None
     signed = _signed(encoding, params) if version >= 2 else None
     if _digest(members, signed) != header.get("sha256"):
