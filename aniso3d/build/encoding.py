@@ -326,13 +326,15 @@ def _decode_unit_normal(codes: np.ndarray, bits: Bits, span: float | None, sampl
     return _decode_oct(codes, oct_bits(bits)) if span is None else _decode_frame(codes, sample, bits.normal, span)
 
 
-def _decode_normal(codes: np.ndarray, length: np.ndarray, length_range: list, bits: Bits, span: float | None,
-                   sample: np.ndarray) -> np.ndarray:  # fmt: skip
+def _decode_normal(codes: np.ndarray | None, length: np.ndarray, length_range: list, bits: Bits,
+                   span: float | None, sample: np.ndarray | None, unit: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
     """(E, 3) float32 mean normals from their direction codes (2, E), in the
-    sample frame (``span``) or octahedral (``span`` None), and length codes
-    (1, E) on ``length_range``. float32 as built; F is computed from these
-    very values by encoder and decoder, so that decoded D >= F exactly."""
-    unit = _decode_unit_normal(codes, bits, span, sample)
+    sample frame (``span``) or octahedral (``span`` None), or their unit
+    directions ``unit`` when already decoded, and length codes (1, E) on
+    ``length_range``. float32 as built; F is computed from these very values
+    by encoder and decoder, so that decoded D >= F exactly."""
+    if unit is None:
+        unit = _decode_unit_normal(codes, bits, span, sample)
     scale = _decode_range(np.atleast_2d(length), bits.coherence, length_range)[0]
     return (unit * scale[:, None]).astype(np.float32)
 
@@ -729,27 +731,28 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
         parent = _uint8(members, "entry_parent", (e,))
         src = _copy_sources(parent, coords.astype(np.int64), shape, voxel, direction, k)
         # A copied member holds the codes of entries without a parent, in
-        # order: entry i takes row rank[src[i]] of it.
-        roots = parent == 0
-        n_roots = int(roots.sum())
-        take = (np.cumsum(roots) - 1)[src]
+        # order: entry i takes row rank[src[i]] of it. Decoded for those
+        # entries only, then gathered.
+        roots = np.flatnonzero(parent == 0)
+        take = (np.cumsum(parent == 0) - 1)[src]
     else:
-        take, src = None, None
+        src, roots, take = None, np.arange(e), np.arange(e)
 
     def codes(name: str, rows: int, b: int) -> np.ndarray:
-        copied = take is not None and name in COPIED
-        planes = _uint8(members, name, (rows * _width(b), n_roots if copied else e))
+        n = len(roots) if name in COPIED else e
+        planes = _uint8(members, name, (rows * _width(b), n))
         c = from_planes(planes, rows, _width(b))
         if c.size and int(c.max()) >= 2**b:
             raise FormatError(f"{name} holds codes above {b} bits")
-        return c[:, take] if copied else c
+        return c
 
     area = _decode_log(codes("entry_area", 1, bits.area)[0], bits.area, area_span)
     nb = bits.normal if span is not None else oct_bits(bits)
-    normal = _decode_normal(codes("entry_normal", 2, nb), codes("entry_coherence", 1, bits.coherence),
-                            ranges["coherence"], bits, span, dirs[direction])  # fmt: skip
+    unit = _decode_unit_normal(codes("entry_normal", 2, nb), bits, span, dirs[direction[roots]])
+    normal = _decode_normal(None, codes("entry_coherence", 1, bits.coherence), ranges["coherence"], bits, span,
+                            None, unit)[take]  # fmt: skip
+    unit = unit[take]
     if version >= 3:
-        unit = _decode_unit_normal(codes("entry_normal", 2, nb), bits, span, dirs[direction])
         centroid = _decode_centroid_frame(codes("entry_centroid", 3, max(bits.centroid, bits.depth)), origin,
                                           float(voxel_size), coords.astype(np.int64), voxel, unit, src, bits)  # fmt: skip
     else:
@@ -760,9 +763,10 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
             centroid_codes, origin, float(voxel_size), coords.astype(np.int64), voxel,
             bits.centroid,
         )  # fmt: skip
-    kd = _decode_range(codes("entry_kd", 3, bits.kd), bits.kd, ranges["kd"]).T
-    ks = _decode_range(codes("entry_ks", 1, bits.ks), bits.ks, ranges["ks"])[0]
-    sh = _decode_range(codes("entry_shininess", 1, bits.shininess), bits.shininess, ranges["shininess"], log=True)[0]
+    kd = _decode_range(codes("entry_kd", 3, bits.kd), bits.kd, ranges["kd"]).T[take]
+    ks = _decode_range(codes("entry_ks", 1, bits.ks), bits.ks, ranges["ks"])[0][take]
+    sh = _decode_range(codes("entry_shininess", 1, bits.shininess), bits.shininess, ranges["shininess"],
+                       log=True)[0][take]  # fmt: skip
     density = facet_density(area, normal, offsets, dirs)
     if bits.density:
         w = _width(bits.density)
