@@ -1,14 +1,14 @@
-"""The compact encoding of a texture: what an ``.a3d`` file of version 2 stores.
+"""The compact encoding of a texture: what an ``.a3d`` file of version 3 stores.
 
 In memory a texture keeps float64 and float32 arrays, about 400 bytes per
 occupied voxel of the default tree. To store it, each field is quantised no
-finer than the images need, and laid out so that deflate (the zip container's
-compression) finds what is left to squeeze: about 1/12 of the memory, 32
-bytes a voxel, for the default tree (docs/encoding.md). Loading decodes float
-arrays of the same dtypes again. With the default :class:`Bits` (h the voxel
-edge; every bound is tested in tests/test_encoding.py, the bits were chosen
-by ``demos/bench_encoding.py``: together they cost at most 0.03 dB of PSNR on
-the scenes measured there):
+finer than the images need, predicted from its neighbours where a surface
+continues across voxels, and laid out so that LZMA (the zip container's
+compression) finds what is left to squeeze: about 1/17 of the memory for the
+default tree (docs/encoding.md). Loading decodes float arrays of the same
+dtypes again. With the default :class:`Bits` (h the voxel edge; every bound
+is tested in tests/test_encoding.py, the bits were chosen with
+``demos/bench_encoding.py``):
 
 ==========================  ======================================================  ===============================
 field                       stored as                                               error (default bits)
@@ -16,18 +16,36 @@ field                       stored as                                           
 origin, shape, directions   as they are                                             exact
 coords                      sorted cell keys, delta-coded, in byte planes           exact
 entry_offsets, _direction   one bit per voxel and sample direction (M, K/8)         exact
+entry_parent                per entry, 0 or which of 13 earlier neighbours it       exact
+                            copies normal and materials from (see below)
 entry_area                  log2, 10 bits, over [max / 2**24, max]                  relative 0.82 %
 entry_normal (direction)    about the sample direction N_p, 9 bits a coordinate,    0.27 degrees (0.13 at K = 16);
                             or octahedral with 11, whichever deflates smaller       0.12 degrees
 entry_normal (length)       6 bits, steps of 1/63                                   1/126
-entry_centroid              6 bits a coordinate: round(62 f), f its offset in the   h/124 per axis; faces and
-                            voxel                                                   middle of the voxel exact
+entry_centroid              in the frame of the decoded normal: depth along it,     depth h/1180 (10 bits),
+                            10 bits, and two tangent coordinates, 6 bits each, on   h/68 in the plane; the
+                            [-sqrt(3)/2, sqrt(3)/2] h about the voxel centre        voxel's middle exact
 entry_kd                    7 bits: steps of S/127 over the values' own range,      S/254
                             S = max(1, largest value)
 entry_ks                    8 bits, likewise                                        S/510
 entry_shininess             8 bits of log2(1 + n), likewise, S = log2(1 + largest)  log2(1 + n) within S/510
 density                     F (see below), plus D - F in 3 bits of A_v              min(D - F, A_v / 14)
 ==========================  ======================================================  ===============================
+
+**Copying from a neighbour** (version 3). A leaf, a blade or a bar that
+crosses several voxels leaves in each an entry with the same sample
+direction, mean normal and material. An entry whose quantised normal,
+normal length, kd, ks and shininess codes all equal those of the entry with
+the same sample direction in one of the 13 neighbouring voxels that come
+before its own in cell order (:data:`PARENT_OFFSETS`) names that neighbour in
+``entry_parent`` and stores none of them: those members hold the other
+entries' codes only. This is lossless on the codes (each entry decodes to
+exactly what quantising it alone gives); about half the tree's entries copy.
+The decoder follows the parents to each chain's first entry by pointer
+jumping (a few NumPy passes, not a loop over entries). Such an entry's
+centroid lies on its source's plane when their facets are coplanar, so its
+depth code is stored as the difference from the depth of the source's plane
+in its own voxel (mostly 0).
 
 A range's two ends decode exactly, so a scene of one material keeps it
 exactly (two: both).
@@ -45,8 +63,10 @@ and deflates to nearly nothing; ``bits.density = 0`` drops it (``D = F``).
 Every field's quantiser is a pair of functions here (``_encode_*`` and
 ``_decode_*``); :func:`encode` and :func:`decode` run them all. A code array
 of b bits is one uint8 (b <= 8) or uint16 array, stored as byte planes (all
-low bytes, then all high bytes) so that the mostly empty high bytes deflate
-away.
+low bytes, then all high bytes) so that the mostly empty high bytes compress
+away. :func:`decode` also reads version 2's layout (no ``entry_parent``, every
+entry's codes stored, centroids as ``round(62 f)`` per axis of the offset f
+in the voxel).
 
 Registration guarantees what the encoding assumes: coords sorted and inside
 the grid, each voxel's entries sorted by sample direction without repeats,
@@ -119,7 +139,10 @@ class Bits:
     ``density`` 0 stores no residual: the density sphere is then derived
     from the entries alone. Each count lies in 1..16 (2..16 for ``area``, whose
     code 0 means a zero area, ``normal``, a signed coordinate, and
-    ``centroid``, whose steps number ``2**bits - 2``).
+    ``centroid``, a signed coordinate, and ``depth``). ``centroid`` is the
+    bits of each of a centroid's two coordinates in the plane of its mean
+    normal, ``depth`` of its offset along that normal (version 2 files stored
+    each axis with ``centroid`` bits and had no ``depth``).
     """
 
     area: int = 10
@@ -130,7 +153,7 @@ class Bits:
     ks: int = 8
     shininess: int = 8
     density: int = 3
-    depth: int = 8
+    depth: int = 10
 
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():
