@@ -512,7 +512,7 @@ DAMAGED = [
     ("area length", dict(members=_set("entry_area", lambda a: a[:, :-1])), "entry_area has shape"),
     ("area dtype", dict(members=_set("entry_area", lambda a: a.astype(np.int16))), "entry_area has shape .* dtype"),
     ("codes above bits", dict(members=_set("entry_normal", lambda a: a | np.uint8(0xF0))),
-     "entry_normal holds codes above (9|11) bits"),
+     "entry_normal holds codes above (10|12) bits"),
     ("density shape", dict(members=_set("density", lambda a: a[:, :-1])), "density has shape"),
     ("directions dtype", dict(members=_set("directions", lambda a: a.astype(np.float32))), "directions has shape"),
 ]  # fmt: skip

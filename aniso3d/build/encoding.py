@@ -145,8 +145,8 @@ class Bits:
     each axis with ``centroid`` bits and had no ``depth``).
     """
 
-    area: int = 10
-    normal: int = 9
+    area: int = 11
+    normal: int = 10
     coherence: int = 6
     centroid: int = 6
     kd: int = 7

@@ -19,7 +19,7 @@ finer one (:mod:`aniso3d.build.pyramid`); :func:`entry_points` uses them to
 put points on the true surface. The ``.a3d`` file is
 :mod:`aniso3d.build.texture_file`'s business, and how it quantises the
 fields :mod:`aniso3d.build.encoding`'s: in memory the arrays stay float
-(:attr:`AnisoTexture.memory_nbytes`), stored they take about 1/12 of that
+(:attr:`AnisoTexture.memory_nbytes`), stored they take about 1/16 of that
 (:attr:`AnisoTexture.nbytes`).
 """
 
@@ -204,8 +204,8 @@ class AnisoTexture:
     @cached_property
     def nbytes(self) -> int:
         """Bytes of the texture as stored and shipped: the size of the ``.a3d``
-        file :meth:`save` writes by default (format version 2, compact
-        encoding, deflated; :mod:`aniso3d.build.encoding`), computed in memory
+        file :meth:`save` writes by default (format version 3, compact
+        encoding, LZMA-compressed; :mod:`aniso3d.build.encoding`), computed in memory
         once. :attr:`memory_nbytes` is the size of the arrays in memory."""
         return encoded_size(self._arrays(), self.voxel_size, self.meta)
 
@@ -265,7 +265,7 @@ class AnisoTexture:
         with a SHA-256 of the arrays); loads without pickle. Written atomically.
 
         ``encoding="compact"`` (default) quantises every field with ``bits``
-        (:mod:`aniso3d.build.encoding`: about 1/12 of :attr:`memory_nbytes`
+        (:mod:`aniso3d.build.encoding`: about 1/16 of :attr:`memory_nbytes`
         for the default tree, with stated error bounds); ``"exact"`` keeps
         the arrays bit for bit (deflated).
         """

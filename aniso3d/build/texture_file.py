@@ -9,11 +9,15 @@ fixed compression level).
 
 Versions:
 
-- **2** (written): the header names an *encoding*. ``"compact"`` (the
+- **3** (written): the header names an *encoding*. ``"compact"`` (the
   default) stores the members of :func:`aniso3d.build.encoding.encode`,
-  quantised, and the numbers :func:`~aniso3d.build.encoding.decode` needs
-  (``params``, inside the checksum); ``"exact"`` stores the texture's arrays
-  as they are. Members are deflated.
+  quantised and predicted from neighbouring voxels, LZMA-compressed, and the
+  numbers :func:`~aniso3d.build.encoding.decode` needs (``params``, inside
+  the checksum); ``"exact"`` stores the texture's arrays as they are,
+  deflated.
+- **2** (read only): as 3, but the compact members are version 2's
+  (:data:`~aniso3d.build.encoding.MEMBERS_V2`: no copying from neighbours,
+  centroids per axis) and deflated.
 - **1** (read only): the texture's arrays as they are, not compressed.
 
 This module knows the container only: which arrays a texture has and what
@@ -49,7 +53,7 @@ __all__ = ["ARRAYS", "ENCODINGS", "FORMAT_NAME", "FORMAT_VERSION", "TextureFile"
 FORMAT_NAME = "aniso3d-texture"
 #: The version written; every version from 1 up to it is read.
 FORMAT_VERSION = 3
-#: The encodings of version 2: quantised (default) or the arrays as they are.
+#: The encodings of versions 2 and 3: quantised (default) or the arrays as they are.
 ENCODINGS = ("compact", "exact")
 REBUILD = "rebuild it from its mesh ('aniso3d build MESH -o out.a3d')"
 
@@ -82,7 +86,7 @@ def write_texture_file(
     bits: Bits = DEFAULT_BITS,
 ) -> Path:
     """Write ``arrays`` (every name of :data:`ARRAYS`) with the voxel size and
-    the JSON-representable part of ``meta``, atomically, as format version 2
+    the JSON-representable part of ``meta``, atomically, as format version 3
     in ``encoding`` ("compact", quantised with ``bits``, or "exact"), streamed
     into the file. The texture is encoded before the file is touched, so a
     texture that cannot be encoded leaves no file behind."""
@@ -224,13 +228,13 @@ def _member(name: str, deflate: bool = False, lzma: bool = False) -> zipfile.Zip
 
 
 def _signed(encoding: str, params: dict) -> str:
-    """The header values the checksum covers besides the arrays (version 2)."""
+    """The header values the checksum covers besides the arrays (versions 2 and 3)."""
     return json.dumps({"encoding": encoding, "params": params}, sort_keys=True)
 
 
 def _digest(arrays: dict[str, np.ndarray], signed: str | None = None) -> str:
     """SHA-256 over each array's name, dtype, shape and bytes, in name order,
-    then (version 2) the encoding and its parameters."""
+    then (versions 2 and 3) the encoding and its parameters."""
     h = hashlib.sha256()
     for n in sorted(arrays):
         a = np.ascontiguousarray(arrays[n])
