@@ -434,13 +434,13 @@ def _steps(bits: int) -> tuple[int, int]:
     return m, 2 * math.floor(m / math.sqrt(3.0))
 
 
-def _frame_offsets(codes: np.ndarray, unit: np.ndarray, bits: Bits) -> np.ndarray:
+def _frame_offsets(codes: np.ndarray, unit: np.ndarray, t: np.ndarray, b: np.ndarray, bits: Bits) -> np.ndarray:
     """(E, 3) offsets from the voxel centre, in voxels, of centroid codes
     (3, E) (depth along the unit normal, then the two tangent coordinates
-    of :func:`~aniso3d.grid.tangent_frame`), clamped into the voxel."""
+    along ``t`` and ``b``, :func:`~aniso3d.grid.tangent_frame` of it),
+    clamped into the voxel."""
     md, sd = _steps(bits.depth)
     mp, sp = _steps(bits.centroid)
-    t, b = tangent_frame(unit)
     d = (codes[0].astype(np.float64) - md) / sd
     u = (codes[1].astype(np.float64) - mp) / sp
     v = (codes[2].astype(np.float64) - mp) / sp
@@ -475,23 +475,28 @@ def _encode_centroid_frame(centroid, origin, voxel_size, coords, voxel, unit, pa
     if len(child):
         root = parent_src[child]
         # The sources' centroids as decoded, seen from each child's voxel.
-        at = _frame_offsets(codes[:, root], unit[root], bits) + coords[voxel[root]] - coords[voxel[child]]
+        at = _frame_offsets(codes[:, root], unit[root], t[root], b[root], bits)
+        at += coords[voxel[root]] - coords[voxel[child]]
         codes[0, child] = (codes[0, child] - _depth_codes(at, unit[child], bits.depth)) % 2**bits.depth
     return codes.astype(np.uint16)
 
 
-def _decode_centroid_frame(codes, origin, voxel_size, coords, voxel, unit, parent_src, bits) -> np.ndarray:
+def _decode_centroid_frame(codes, origin, voxel_size, coords, voxel, unit, tb, parent_src, bits) -> np.ndarray:
+    """The inverse of :func:`_encode_centroid_frame`; ``tb`` is
+    :func:`~aniso3d.grid.tangent_frame` of ``unit``."""
+    t, b = tb
     codes = codes.astype(np.int64)
     child = np.flatnonzero(parent_src != np.arange(codes.shape[1]))
     if len(child):
         root = parent_src[child]
-        at = _frame_offsets(codes[:, root], unit[root], bits) + coords[voxel[root]] - coords[voxel[child]]
+        at = _frame_offsets(codes[:, root], unit[root], t[root], b[root], bits)
+        at += coords[voxel[root]] - coords[voxel[child]]
         codes[0, child] = (codes[0, child] + _depth_codes(at, unit[child], bits.depth)) % 2**bits.depth
     md, _ = _steps(bits.depth)
     mp, _ = _steps(bits.centroid)
     if codes.size and (int(codes[0].max()) > 2 * md or int(codes[1:].max()) > 2 * mp):
         raise FormatError("entry_centroid holds codes past the voxel")
-    return origin + (coords[voxel] + 0.5 + _frame_offsets(codes, unit, bits)) * voxel_size
+    return origin + (coords[voxel] + 0.5 + _frame_offsets(codes, unit, t, b, bits)) * voxel_size
 
 
 def facet_density(area: np.ndarray, normal: np.ndarray, offsets: np.ndarray, directions: np.ndarray) -> np.ndarray:
@@ -774,10 +779,12 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
     unit = _decode_unit_normal(codes("entry_normal", 2, nb), bits, span, dirs[direction[roots]])
     normal = _decode_normal(None, codes("entry_coherence", 1, bits.coherence), ranges["coherence"], bits, span,
                             None, unit)[take]  # fmt: skip
-    unit = unit[take]
     if version >= 3:
+        # The tangent frames of the entries that store a normal, gathered like it.
+        tb = tuple(x[take] for x in tangent_frame(unit))
         centroid = _decode_centroid_frame(codes("entry_centroid", 3, max(bits.centroid, bits.depth)), origin,
-                                          float(voxel_size), coords.astype(np.int64), voxel, unit, src, bits)  # fmt: skip
+                                          float(voxel_size), coords.astype(np.int64), voxel, unit[take], tb, src,
+                                          bits)  # fmt: skip
     else:
         centroid_codes = codes("entry_centroid", 3, bits.centroid)
         if centroid_codes.size and int(centroid_codes.max()) > 2**bits.centroid - 2:
