@@ -21,7 +21,7 @@ entry_parent                per entry, 0 or which of 13 earlier neighbours it   
 entry_area                  log2, 10 bits, over [max / 2**24, max]                  relative 0.82 %
 entry_normal (direction)    about the sample direction N_p, 9 bits a coordinate,    0.27 degrees (0.13 at K = 16);
                             or octahedral with 11, whichever deflates smaller       0.12 degrees
-entry_normal (length)       6 bits, steps of 1/63                                   1/126
+entry_normal (length) c     6 bits of sqrt(1 - c), steps of 1/63                    sqrt(1 - c) within 1/126
 entry_centroid              in the frame of the decoded normal: depth along it,     depth h/1180 (10 bits),
                             10 bits, and two tangent coordinates, 6 bits each, on   h/68 in the plane; the
                             [-sqrt(3)/2, sqrt(3)/2] h about the voxel centre        voxel's middle exact
@@ -349,16 +349,36 @@ def _decode_unit_normal(codes: np.ndarray, bits: Bits, span: float | None, sampl
     return _decode_oct(codes, oct_bits(bits)) if span is None else _decode_frame(codes, sample, bits.normal, span)
 
 
-def _decode_normal(codes: np.ndarray | None, length: np.ndarray, length_range: list, bits: Bits,
+def _encode_spread(length: np.ndarray, bits: int) -> np.ndarray:
+    """(1, E) codes of mean normal lengths c in [0, 1] (version 3):
+    ``round(sqrt(1 - c) * (2**bits - 1))``. The volume's sheets bend by
+    ``sqrt(1 - c)`` (``aniso3d.rendering.volume.entry_sheets``), steepest
+    near c = 1, where smooth surfaces are: this spends the steps there (c
+    within 1/63**2 of 1 keeps its own code; at 6 bits the largest error, near
+    c = 0, is about 1/63). c = 1 and c = 0 are exact."""
+    top = 2**bits - 1
+    spread = np.clip(1.0 - np.asarray(length, dtype=np.float64), 0.0, 1.0)
+    return np.round(np.sqrt(spread) * top).astype(np.uint16)[None]
+
+
+def _decode_spread(codes: np.ndarray, bits: int) -> np.ndarray:
+    return 1.0 - (np.atleast_2d(codes)[0].astype(np.float64) / (2**bits - 1)) ** 2
+
+
+def _decode_normal(codes: np.ndarray | None, length: np.ndarray, length_range: list | None, bits: Bits,
                    span: float | None, sample: np.ndarray | None, unit: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
     """(E, 3) float32 mean normals from their direction codes (2, E), in the
     sample frame (``span``) or octahedral (``span`` None), or their unit
-    directions ``unit`` when already decoded, and length codes (1, E) on
-    ``length_range``. float32 as built; F is computed from these very values
-    by encoder and decoder, so that decoded D >= F exactly."""
+    directions ``unit`` when already decoded, and length codes (1, E): of
+    :func:`_encode_spread` when ``length_range`` is None (version 3), else
+    on ``length_range`` (version 2). float32 as built; F is computed from
+    these very values by encoder and decoder, so that decoded D >= F exactly."""
     if unit is None:
         unit = _decode_unit_normal(codes, bits, span, sample)
-    scale = _decode_range(np.atleast_2d(length), bits.coherence, length_range)[0]
+    if length_range is None:
+        scale = _decode_spread(length, bits.coherence)
+    else:
+        scale = _decode_range(np.atleast_2d(length), bits.coherence, length_range)[0]
     return (unit * scale[:, None]).astype(np.float32)
 
 
@@ -653,7 +673,10 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
     # A zero mean normal (facets that cancel) has no direction: any will do.
     sample = dirs[np.asarray(arrays["entry_direction"], dtype=np.int64)]
     unit = np.where((length > 0)[:, None], normal / np.where(length > 0, length, 1.0)[:, None], sample)
-    coherence_codes, coherence_range = _encode_range(np.minimum(length, 1.0), bits.coherence)
+    coherence_codes = _encode_spread(np.minimum(length, 1.0), bits.coherence)
+    # (version 2 stored lengths on their own range; the range written says
+    # the codes' limit, and version 3 decodes them with _decode_spread)
+    coherence_range = [[0.0, 1.0, 2**bits.coherence - 1]]
     kd_codes, kd_range = _encode_range(np.asarray(arrays["entry_kd"]).T, bits.kd)
     ks_codes, ks_range = _encode_range(arrays["entry_ks"], bits.ks)
     sh_codes, sh_range = _encode_range(arrays["entry_shininess"], bits.shininess, log=True)
@@ -704,7 +727,7 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
     if bits.density:
         # The residual against F of the *decoded* entries: what decode adds back.
         area = _decode_log(area_codes, bits.area, area_span)
-        nrm = _decode_normal(normal_codes, coherence_codes, coherence_range, bits, span, sample)
+        nrm = _decode_normal(normal_codes, coherence_codes, None, bits, span, sample)
         f = facet_density(area, nrm, offsets, dirs)
         a_v = np.bincount(voxel, weights=area, minlength=len(coords))
         residual = np.asarray(arrays["density"], dtype=np.float64) - f
@@ -777,7 +800,8 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
     area = _decode_log(codes("entry_area", 1, bits.area)[0], bits.area, area_span)
     nb = bits.normal if span is not None else oct_bits(bits)
     unit = _decode_unit_normal(codes("entry_normal", 2, nb), bits, span, dirs[direction[roots]])
-    normal = _decode_normal(None, codes("entry_coherence", 1, bits.coherence), ranges["coherence"], bits, span,
+    length_range = None if version >= 3 else ranges["coherence"]
+    normal = _decode_normal(None, codes("entry_coherence", 1, bits.coherence), length_range, bits, span,
                             None, unit)[take]  # fmt: skip
     if version >= 3:
         # The tangent frames of the entries that store a normal, gathered like it.

@@ -39,7 +39,7 @@ from aniso3d.build.clip import Grid, make_grid
 from aniso3d.build.encoding import ARRAYS, DEFAULT_BITS, Bits, decode, encode
 from aniso3d.build.mesh import Mesh
 from aniso3d.build.points import PointCloud
-from aniso3d.build.texture_file import encoded_size, read_texture_file, write_texture_file
+from aniso3d.build.texture_file import FORMAT_VERSION, encoded_size, read_texture_file, write_texture_file
 from aniso3d.errors import FormatError, InputError
 from aniso3d.grid import cell_keys, ranges, tangent_frame
 
@@ -90,6 +90,8 @@ def sphere_directions(k: int, kind: str = "fibonacci", seed: int = 0) -> np.ndar
 #: encoding (loaded from a compact file, or :meth:`AnisoTexture.as_stored`):
 #: its centroids and normals carry the encoding's rounding, which the volume
 #: renderer's sheet crossings allow for (:func:`aniso3d.rendering.volume.entry_sheets`).
+#: Its value is the file's format version (2 or 3; ``True`` in textures saved
+#: before version 3, which came from version 2 files): how fine the rounding is.
 QUANTISED = "quantised"
 
 
@@ -215,7 +217,7 @@ class AnisoTexture:
         quantised and decoded; see :mod:`aniso3d.build.encoding` for the
         error of each)."""
         members, params = encode(self._arrays(), self.voxel_size, bits)
-        return AnisoTexture(voxel_size=self.voxel_size, meta={**self.meta, QUANTISED: True},
+        return AnisoTexture(voxel_size=self.voxel_size, meta={**self.meta, QUANTISED: FORMAT_VERSION},
                             **decode(members, params, self.voxel_size))  # fmt: skip
 
     def _arrays(self) -> dict[str, np.ndarray]:
@@ -280,7 +282,7 @@ class AnisoTexture:
         """Read a file written by :meth:`save` (any version up to the current
         one); refuse foreign, damaged or newer files."""
         f = read_texture_file(path)
-        meta = {**f.meta, QUANTISED: True} if f.encoding == "compact" else f.meta
+        meta = {**f.meta, QUANTISED: f.version} if f.encoding == "compact" else f.meta
         try:
             return cls(voxel_size=f.voxel_size, meta=meta, **f.arrays)
         except FormatError as exc:
