@@ -311,10 +311,12 @@ def _encode_frame(v: np.ndarray, sample: np.ndarray, bits: int, span: float) -> 
     return (np.round(np.clip(scaled, -1.0, 1.0) * m) + m).astype(np.uint16)
 
 
-def _decode_frame(codes: np.ndarray, sample: np.ndarray, bits: int, span: float) -> np.ndarray:
+def _decode_frame(codes: np.ndarray, sample: np.ndarray, bits: int, span: float, frame=None) -> np.ndarray:
+    """The inverse of :func:`_encode_frame`; ``frame`` is ``tangent_frame(sample)``
+    when already known (a sample direction's rows, gathered)."""
     m = 2 ** (bits - 1) - 1
     g = (codes.astype(np.float64) - m) / m * span
-    t, b = tangent_frame(sample)
+    t, b = tangent_frame(sample) if frame is None else frame
     v = sample + g[0][:, None] * t + g[1][:, None] * b
     return v / np.linalg.norm(v, axis=1, keepdims=True)
 
@@ -344,9 +346,12 @@ def _deflated(codes: np.ndarray, bits: int) -> int:
     return len(zlib.compress(to_planes(codes, _width(bits)).tobytes()))
 
 
-def _decode_unit_normal(codes: np.ndarray, bits: Bits, span: float | None, sample: np.ndarray) -> np.ndarray:
+def _decode_unit_normal(codes: np.ndarray, bits: Bits, span: float | None, sample: np.ndarray,
+                        frame=None) -> np.ndarray:  # fmt: skip
     """(E, 3) float64 unit normals from their direction codes (2, E)."""
-    return _decode_oct(codes, oct_bits(bits)) if span is None else _decode_frame(codes, sample, bits.normal, span)
+    if span is None:
+        return _decode_oct(codes, oct_bits(bits))
+    return _decode_frame(codes, sample, bits.normal, span, frame)
 
 
 def _encode_spread(length: np.ndarray, bits: int) -> np.ndarray:
@@ -799,7 +804,9 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
 
     area = _decode_log(codes("entry_area", 1, bits.area)[0], bits.area, area_span)
     nb = bits.normal if span is not None else oct_bits(bits)
-    unit = _decode_unit_normal(codes("entry_normal", 2, nb), bits, span, dirs[direction[roots]])
+    # tangent frames of the K sample directions, gathered (not one per entry)
+    frame = tuple(x[direction[roots]] for x in tangent_frame(dirs)) if span is not None else None
+    unit = _decode_unit_normal(codes("entry_normal", 2, nb), bits, span, dirs[direction[roots]], frame)
     length_range = None if version >= 3 else ranges["coherence"]
     normal = _decode_normal(None, codes("entry_coherence", 1, bits.coherence), length_range, bits, span,
                             None, unit)[take]  # fmt: skip
