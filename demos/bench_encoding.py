@@ -69,14 +69,17 @@ FIELDS = {
 STRUCTURE = ("origin", "shape", "directions", "coords", "entry_mask", "entry_parent")
 
 #: (row name, field, bits changed): other bit counts tried for one field
-#: (finer than the defaults: what each extra bit would cost and buy).
+#: (coarser and finer than the defaults: what each bit saves or costs and buys).
 ALTERNATIVES = (
     ("density derived, 0 bits", "density", {"density": 0}),
     ("density 8 bits", "density", {"density": 8}),
+    ("area 10 bits", "area", {"area": 10}),
     ("area 12 bits", "area", {"area": 12}),
-    ("normal 10 bits", "normal", {"normal": 10, "coherence": 8}),
+    ("normal 9 bits", "normal", {"normal": 9}),
+    ("normal 11 bits", "normal", {"normal": 11, "coherence": 8}),
     ("centroid 8 bits", "centroid", {"centroid": 8}),
-    ("centroid depth 10 bits", "centroid", {"depth": 10}),
+    ("centroid depth 8 bits", "centroid", {"depth": 8}),
+    ("centroid depth 12 bits", "centroid", {"depth": 12}),
     ("kd 8 bits", "kd", {"kd": 8}),
 )
 
