@@ -358,9 +358,10 @@ def _encode_spread(length: np.ndarray, bits: int) -> np.ndarray:
     """(1, E) codes of mean normal lengths c in [0, 1] (version 3):
     ``round(sqrt(1 - c) * (2**bits - 1))``. The volume's sheets bend by
     ``sqrt(1 - c)`` (``aniso3d.rendering.volume.entry_sheets``), steepest
-    near c = 1, where smooth surfaces are: this spends the steps there (c
-    within 1/63**2 of 1 keeps its own code; at 6 bits the largest error, near
-    c = 0, is about 1/63). c = 1 and c = 0 are exact."""
+    near c = 1, where smooth surfaces are: this spends the steps there (at 6
+    bits, codes about 1/63**2 apart in c near 1, where linear steps were
+    1/63; the largest error, near c = 0, about 1/63). c = 1 and c = 0 are
+    exact."""
     top = 2**bits - 1
     spread = np.clip(1.0 - np.asarray(length, dtype=np.float64), 0.0, 1.0)
     return np.round(np.sqrt(spread) * top).astype(np.uint16)[None]
