@@ -320,6 +320,8 @@ def test_tree_through_a_file_is_within_every_bound(tree_tex, tree_file):
 
 
 @pytest.mark.parametrize("bits", [Bits(), Bits(area=8, normal=10, centroid=6, kd=6, density=4),
+                                  Bits(area=2, normal=2, coherence=1, centroid=2, depth=2, kd=1, ks=1,
+                                       shininess=1, density=1),
                                   Bits(area=16, normal=16, coherence=16, centroid=16, kd=16, ks=16,
                                        shininess=16, density=16)])  # fmt: skip
 def test_bounds_hold_at_other_bits(tree_tex, bits):
@@ -647,3 +649,26 @@ def test_a_childs_depth_is_stored_against_its_sources_plane():
     assert np.std(enc._depth_codes(f, n, b)) > 100
     assert np.median(np.abs(residual)) <= 3 and np.max(np.abs(residual)) <= 8
     assert_within_bounds(tex, tex.as_stored())
+
+
+@pytest.mark.parametrize("bits", [2, 6, 8, 10, 16])
+def test_centroid_frame_steps_cover_the_voxel_and_keep_its_middle_and_faces(bits):
+    """A coordinate in the normal's frame spans the voxel's half diagonal
+    sqrt(3)/2 within its codes; 0 and +-1/2 (the middle, and the faces of an
+    axis-aligned plane) fall on codes exactly."""
+    m, s = enc._steps(bits)
+    assert m == 2 ** (bits - 1) - 1 and s >= 1
+    assert s * np.sqrt(3) / 2 <= m and (s % 2 == 0 or bits == 2)
+    f = np.array([[0.0, 0.0, 0.0], [0.5, 0.0, 0.0], [-0.5, 0.0, 0.0], [0.0, 0.5, -0.5]])
+    unit = np.array([[1.0, 0.0, 0.0]] * 4)
+    codes = np.zeros((3, 4), dtype=np.int64)
+    codes[0] = enc._depth_codes(f, unit, bits)
+    t, b = enc.tangent_frame(unit)
+    mp, sp = enc._steps(6)
+    codes[1] = mp + np.round(np.sum(f * t, axis=1) * sp)
+    codes[2] = mp + np.round(np.sum(f * b, axis=1) * sp)
+    got = enc._frame_offsets(codes, unit, t, b, Bits(depth=bits))
+    assert np.all(np.isfinite(got))
+    exact = slice(None) if bits > 2 else slice(0, 1)  # 2 bits: the middle only
+    np.testing.assert_allclose(got[exact, 0], f[exact, 0], atol=1e-15)
+    np.testing.assert_allclose(got[:, 1:], f[:, 1:], atol=1e-15)

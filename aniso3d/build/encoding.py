@@ -436,7 +436,7 @@ def _decode_unit(codes: np.ndarray, bits: int, scale: float) -> np.ndarray:
 
 
 def _encode_centroid(centroid, origin, voxel_size, coords, voxel, bits) -> np.ndarray:
-    """(3, E) codes of each centroid's offset f in [0, 1] inside its voxel,
+    """Version 2's centroids (read by :func:`decode`, no longer written): (3, E) codes of each centroid's offset f in [0, 1] inside its voxel,
     per axis: ``round(f * n)`` with ``n = 2**bits - 2`` (even), so the voxel's
     faces and middle plane (0, 1/2, 1: axis-aligned surfaces) are exact and
     the rest within ``h / 2n``."""
@@ -455,9 +455,9 @@ def _steps(bits: int) -> tuple[int, int]:
     ``m + round(x s)`` in 0..2m for x in [-sqrt(3)/2, sqrt(3)/2] (a voxel's
     half diagonal), ``m = 2**(bits-1) - 1`` and ``s`` the largest even number
     with ``s sqrt(3)/2 <= m``: 0 and +-1/2 (the voxel's middle and faces)
-    are exact."""
+    are exact. (2 bits: ``s = 1``, codes -1, 0, 1 voxel, clamped into it.)"""
     m = 2 ** (bits - 1) - 1
-    return m, 2 * math.floor(m / math.sqrt(3.0))
+    return m, max(1, 2 * math.floor(m / math.sqrt(3.0)))
 
 
 def _frame_offsets(codes: np.ndarray, unit: np.ndarray, t: np.ndarray, b: np.ndarray, bits: Bits) -> np.ndarray:
