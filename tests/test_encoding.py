@@ -9,7 +9,6 @@ import io
 import json
 import re
 import zipfile
-import zlib
 from pathlib import Path
 
 import numpy as np
@@ -502,7 +501,8 @@ DAMAGED = [
      "range of ks"),
     ("ranges short", dict(header=lambda h: h["params"]["ranges"].update(kd=[[0, 1, 3]])), "range of kd"),
     ("range steps", dict(header=lambda h: h["params"]["ranges"].update(ks=[[0, 1, 300]])), "range of ks"),
-    ("centroid past voxel", dict(members=_set("entry_centroid", lambda a: np.concatenate([a[:2], a[2:3] | 0xFF, a[3:]]))),
+    ("centroid past voxel",
+     dict(members=_set("entry_centroid", lambda a: np.concatenate([a[:2], a[2:3] | 0xFF, a[3:]]))),
      "past the voxel"),
     ("parent past 13", dict(members=_set("entry_parent", lambda a: a | np.uint8(0x10))), "entry_parent holds codes"),
     ("parent without entry", dict(members=_set("entry_parent", lambda a: np.where(a == 0, np.uint8(13), a))),
@@ -615,8 +615,8 @@ def test_copying_from_a_neighbour_loses_nothing(tree_tex):
     child = np.flatnonzero(parent)
     cell = tree_tex.coords[voxel[child]] + enc.PARENT_OFFSETS[parent[child] - 1]
     key = {(tuple(c), d): i for i, (c, d) in enumerate(zip(map(tuple, tree_tex.coords[voxel]),
-                                                           tree_tex.entry_direction))}  # fmt: skip
-    nb = np.array([key[(tuple(c), d)] for c, d in zip(cell, tree_tex.entry_direction[child])])
+                                                           tree_tex.entry_direction, strict=True))}  # fmt: skip
+    nb = np.array([key[(tuple(c), d)] for c, d in zip(cell, tree_tex.entry_direction[child], strict=True)])
     assert np.all(nb < child)
     np.testing.assert_array_equal(got.entry_kd[child], got.entry_kd[nb])
     np.testing.assert_array_equal(got.entry_normal[child], got.entry_normal[nb])

@@ -371,8 +371,15 @@ def _decode_spread(codes: np.ndarray, bits: int) -> np.ndarray:
     return 1.0 - (np.atleast_2d(codes)[0].astype(np.float64) / (2**bits - 1)) ** 2
 
 
-def _decode_normal(codes: np.ndarray | None, length: np.ndarray, length_range: list | None, bits: Bits,
-                   span: float | None, sample: np.ndarray | None, unit: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+def _decode_normal(
+    codes: np.ndarray | None,
+    length: np.ndarray,
+    length_range: list | None,
+    bits: Bits,
+    span: float | None,
+    sample: np.ndarray | None,
+    unit: np.ndarray | None = None,
+) -> np.ndarray:
     """(E, 3) float32 mean normals from their direction codes (2, E), in the
     sample frame (``span``) or octahedral (``span`` None), or their unit
     directions ``unit`` when already decoded, and length codes (1, E): of
@@ -436,8 +443,9 @@ def _decode_unit(codes: np.ndarray, bits: int, scale: float) -> np.ndarray:
 
 
 def _encode_centroid(centroid, origin, voxel_size, coords, voxel, bits) -> np.ndarray:
-    """Version 2's centroids (read by :func:`decode`, no longer written): (3, E) codes of each centroid's offset f in [0, 1] inside its voxel,
-    per axis: ``round(f * n)`` with ``n = 2**bits - 2`` (even), so the voxel's
+    """Version 2's centroids (read by :func:`decode`, no longer written):
+    (3, E) codes of each centroid's offset f in [0, 1] inside its voxel, per
+    axis: ``round(f * n)`` with ``n = 2**bits - 2`` (even), so the voxel's
     faces and middle plane (0, 1/2, 1: axis-aligned surfaces) are exact and
     the rest within ``h / 2n``."""
     f = (np.asarray(centroid, dtype=np.float64) - origin) / voxel_size - coords[voxel]
