@@ -18,9 +18,9 @@ coords                      sorted cell keys, delta-coded, in byte planes       
 entry_offsets, _direction   one bit per voxel and sample direction (M, K/8)         exact
 entry_parent                per entry, 0 or which of 13 earlier neighbours it       exact
                             copies normal and materials from (see below)
-entry_area                  log2, 10 bits, over [max / 2**24, max]                  relative 0.82 %
-entry_normal (direction)    about the sample direction N_p, 9 bits a coordinate,    0.27 degrees (0.13 at K = 16);
-                            or octahedral with 11, whichever deflates smaller       0.12 degrees
+entry_area                  log2, 11 bits, over [max / 2**24, max]                  relative 0.41 %
+entry_normal (direction)    about the sample direction N_p, 10 bits a coordinate,   0.14 degrees (0.07 at K = 16);
+                            or octahedral with 12, whichever deflates smaller       0.06 degrees
 entry_normal (length) c     6 bits of sqrt(1 - c), steps of 1/63                    sqrt(1 - c) within 1/126
 entry_centroid              in the frame of the decoded normal: depth along it,     depth h/1180 (10 bits),
                             10 bits, and two tangent coordinates, 6 bits each, on   h/68 in the plane; the
