@@ -1,10 +1,10 @@
-"""What the compact texture encoding (``.a3d`` version 2) costs in bytes and in image error.
+"""What the compact texture encoding (``.a3d`` version 3) costs in bytes and in image error.
 
 Per scene: the mesh, built at ``--resolution`` with K = ``--directions``
 (``build_texture``), its sizes (the mesh as a binary PLY: 12 bytes a vertex,
 13 a triangle; the texture in memory, which is also what a version 1 file
 stored; the compact file :meth:`AnisoTexture.save` writes by default), and
-per stored field its deflated bytes in that file and what quantising that
+per stored field its compressed bytes in that file and what quantising that
 field alone does to the images: PSNR against the polygons at ``--gt-ssaa``
 x ``--gt-ssaa`` samples per pixel, of the volume renderer and of the
 high-quality splats, from the texture with that one field as the file
@@ -63,18 +63,23 @@ FIELDS = {
     "ks, shininess": (("entry_ks", "entry_shininess"), ("entry_ks", "entry_shininess")),
     "density": (("density",), ("density",)),
 }
-#: Everything else in the file: the grid, the sample directions, the cells and
-#: which sample directions each voxel has entries at (exact), the header.
-STRUCTURE = ("origin", "shape", "directions", "coords", "entry_mask")
+#: Everything else in the file: the grid, the sample directions, the cells,
+#: which sample directions each voxel has entries at and which entries copy a
+#: neighbour's normal and materials (exact), the header.
+STRUCTURE = ("origin", "shape", "directions", "coords", "entry_mask", "entry_parent")
 
 #: (row name, field, bits changed): other bit counts tried for one field
-#: (finer than the defaults: what each extra bit would cost and buy).
+#: (coarser and finer than the defaults: what each bit saves or costs and buys).
 ALTERNATIVES = (
     ("density derived, 0 bits", "density", {"density": 0}),
     ("density 8 bits", "density", {"density": 8}),
+    ("area 10 bits", "area", {"area": 10}),
     ("area 12 bits", "area", {"area": 12}),
-    ("normal 10 bits", "normal", {"normal": 10, "coherence": 8}),
+    ("normal 9 bits", "normal", {"normal": 9}),
+    ("normal 11 bits", "normal", {"normal": 11, "coherence": 8}),
     ("centroid 8 bits", "centroid", {"centroid": 8}),
+    ("centroid depth 8 bits", "centroid", {"depth": 8}),
+    ("centroid depth 12 bits", "centroid", {"depth": 12}),
     ("kd 8 bits", "kd", {"kd": 8}),
 )
 
@@ -108,11 +113,18 @@ def ply_bytes(mesh: Mesh) -> int:
     return 12 * len(mesh.vertices) + 13 * mesh.n_faces
 
 
-def member_bytes(tex: AnisoTexture, bits, folder: Path) -> tuple[int, dict[str, int]]:
-    """File size of the compact encoding and each member's deflated bytes
+def member_bytes(tex: AnisoTexture, bits, folder: Path, times: dict | None = None) -> tuple[int, dict[str, int]]:
+    """File size of the compact encoding and each member's compressed bytes
     (its zip local header included); the header member and the zip's
-    directory are counted under ``header``."""
+    directory are counted under ``header``. With ``times``, the seconds
+    :meth:`AnisoTexture.save` and :meth:`AnisoTexture.load` took go there."""
+    t0 = time.perf_counter()
     path = tex.save(folder / "x.a3d", bits=bits)
+    if times is not None:
+        times["save"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        AnisoTexture.load(path)
+        times["load"] = time.perf_counter() - t0
     size = path.stat().st_size
     out = {}
     with zipfile.ZipFile(path) as zf:
@@ -150,7 +162,8 @@ def run_scene(name: str, mesh: Mesh, args, gl: GLContext, folder: Path) -> dict:
     t0 = time.perf_counter()
     tex = build_texture(mesh, args.resolution, args.directions)
     build_s = time.perf_counter() - t0
-    size, members = member_bytes(tex, args.bits, folder)
+    times: dict[str, float] = {}
+    size, members = member_bytes(tex, args.bits, folder, times)
     stored = tex.as_stored(args.bits)
     dens = np.asarray(tex.density)
     derived = facet_density(tex.entry_area, tex.entry_normal, tex.entry_offsets, tex.directions)
@@ -158,7 +171,7 @@ def run_scene(name: str, mesh: Mesh, args, gl: GLContext, folder: Path) -> dict:
     res = {
         "name": name, "triangles": mesh.n_faces, "vertices": len(mesh.vertices), "voxels": tex.n_voxels,
         "entries": tex.n_entries, "ply": ply_bytes(mesh), "memory": tex.memory_nbytes, "file": size,
-        "members": members, "build_s": build_s, "rows": [],
+        "members": members, "build_s": build_s, "rows": [], "save_s": times["save"], "load_s": times["load"],
         "derived_l1": float(np.abs(dens - derived).sum() / max(dens.sum(), 1e-300)),
     }  # fmt: skip
     variants = [("all", None, stored)]
@@ -242,6 +255,7 @@ def main() -> None:
             f"{res['memory'] / res['ply']:.2f}", f"{res['file'] / res['ply']:.3f}",
             f"{res['memory'] / res['file']:.1f}", f"{res['file'] / res['voxels']:.1f}",
             f"{res['base'][0]:.2f}", f"{res['base'][1]:.2f}", f"{100 * res['derived_l1']:.2f}",
+            f"{res['save_s']:.2f}", f"{res['load_s']:.2f}",
         ])  # fmt: skip
         members = res["members"]
         structure = sum(members.get(m, 0) for m in STRUCTURE) + members["header"]
@@ -274,16 +288,18 @@ def main() -> None:
         "",
         "**Sizes.** PLY: the mesh as a binary PLY (12 B a vertex, 13 a triangle). Memory: the "
         "texture's arrays as built (`memory_nbytes`; a version 1 file stored these). File: the "
-        f"compact version 2 file `save()` writes with `{args.bits}` (`nbytes` with the defaults). "
+        f"compact file (format version 3) `save()` writes with `{args.bits}` (`nbytes` with the defaults). "
         "PSNR: of the texture as built. F vs D: the density sphere derived from the entries, "
-        "`F_v(p) = sum_e A_e |n_e . N_p|`, against the registered one, `sum |D - F| / sum D`.",
+        "`F_v(p) = sum_e A_e |n_e . N_p|`, against the registered one, `sum |D - F| / sum D`. "
+        "Save, load: seconds of `save()` (encoding, compressing, writing) and `AnisoTexture.load` "
+        "of that file, on this machine at the load stated.",
         "",
         markdown_table(["scene", "triangles", "voxels", "entries", "PLY", "memory", "file", "memory / PLY",
                   "file / PLY", "memory / file", "file B / voxel", "volume PSNR dB", "splat PSNR dB",
-                  "F vs D %"],
+                  "F vs D %", "save s", "load s"],
                  size_rows),  # fmt: skip
         "",
-        "**Per field.** Bytes of the field's members in the compact file (deflated) and per shading "
+        "**Per field.** Bytes of the field's members in the compact file (compressed) and per shading "
         "entry; ΔPSNR (dB) of the volume and of the high-quality splats when only that field is "
         "quantised (`all`: every field, i.e. the loaded file). Negative: worse.",
         "",

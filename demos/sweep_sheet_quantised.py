@@ -1,6 +1,8 @@
 """How wide a quantised texture's sheets must be: the volume's PSNR from the
 texture as built and as its compact file stores it, per scene and per value
-of ``aniso3d.rendering.volume.SHEET_QUANTISED``.
+of ``aniso3d.rendering.volume.SHEET_QUANTISED_V3`` (the widening of a texture
+of format version 3, what ``as_stored()`` gives; ``SHEET_QUANTISED``, for
+version 2 files, was chosen with this script on version 2's encoding).
 
     .venv/bin/python demos/sweep_sheet_quantised.py [--scenes sphere shell ...] [--values 0.01 0.02 0.03]
 
@@ -26,7 +28,7 @@ DEFAULT_SCENES = ("sphere", "shell", "blob", "mixed", "room", "tree", "bush", "g
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenes", nargs="+", default=list(DEFAULT_SCENES))
-    ap.add_argument("--values", type=float, nargs="+", default=[0.0, 0.01, 0.015, 0.02, 0.03])
+    ap.add_argument("--values", type=float, nargs="+", default=[0.0, 0.0025, 0.005, 0.01, 0.02])
     ap.add_argument("--resolution", type=int, default=128)
     ap.add_argument("--size", type=int, default=256)
     args = ap.parse_args()
@@ -40,7 +42,7 @@ def main() -> None:
             truth = r.render(mesh, cam, "mesh", ssaa=8)
         cells = []
         for value in args.values:
-            volume.SHEET_QUANTISED = value
+            volume.SHEET_QUANTISED_V3 = value
             with Renderer((args.size, args.size)) as r:  # a new renderer: the sheets are made at upload
                 built, loaded = psnr(truth, r.render(tex, cam, "volume")), psnr(truth, r.render(stored, cam, "volume"))
             cells.append(f"{value:g}: built {built:.2f} file {loaded:.2f} ({loaded - built:+.2f})")

@@ -1,14 +1,14 @@
-"""The compact encoding of a texture: what an ``.a3d`` file of version 2 stores.
+"""The compact encoding of a texture: what an ``.a3d`` file of version 3 stores.
 
 In memory a texture keeps float64 and float32 arrays, about 400 bytes per
 occupied voxel of the default tree. To store it, each field is quantised no
-finer than the images need, and laid out so that deflate (the zip container's
-compression) finds what is left to squeeze: about 1/12 of the memory, 32
-bytes a voxel, for the default tree (docs/encoding.md). Loading decodes float
-arrays of the same dtypes again. With the default :class:`Bits` (h the voxel
-edge; every bound is tested in tests/test_encoding.py, the bits were chosen
-by ``demos/bench_encoding.py``: together they cost at most 0.03 dB of PSNR on
-the scenes measured there):
+finer than the images need, predicted from its neighbours where a surface
+continues across voxels, and laid out so that LZMA (the zip container's
+compression) finds what is left to squeeze: about 1/17 of the memory for the
+default tree (docs/encoding.md). Loading decodes float arrays of the same
+dtypes again. With the default :class:`Bits` (h the voxel edge; every bound
+is tested in tests/test_encoding.py, the bits were chosen with
+``demos/bench_encoding.py``):
 
 ==========================  ======================================================  ===============================
 field                       stored as                                               error (default bits)
@@ -16,18 +16,36 @@ field                       stored as                                           
 origin, shape, directions   as they are                                             exact
 coords                      sorted cell keys, delta-coded, in byte planes           exact
 entry_offsets, _direction   one bit per voxel and sample direction (M, K/8)         exact
-entry_area                  log2, 10 bits, over [max / 2**24, max]                  relative 0.82 %
-entry_normal (direction)    about the sample direction N_p, 9 bits a coordinate,    0.27 degrees (0.13 at K = 16);
-                            or octahedral with 11, whichever deflates smaller       0.12 degrees
-entry_normal (length)       6 bits, steps of 1/63                                   1/126
-entry_centroid              6 bits a coordinate: round(62 f), f its offset in the   h/124 per axis; faces and
-                            voxel                                                   middle of the voxel exact
+entry_parent                per entry, 0 or which of 13 earlier neighbours it       exact
+                            copies normal and materials from (see below)
+entry_area                  log2, 11 bits, over [max / 2**24, max]                  relative 0.41 %
+entry_normal (direction)    about the sample direction N_p, 10 bits a coordinate,   0.14 degrees (0.07 at K = 16);
+                            or octahedral with 12, whichever deflates smaller       0.06 degrees
+entry_normal (length) c     6 bits of sqrt(1 - c), steps of 1/63                    sqrt(1 - c) within 1/126
+entry_centroid              in the frame of the decoded normal: depth along it,     depth h/1180 (10 bits),
+                            10 bits, and two tangent coordinates, 6 bits each, on   h/68 in the plane; the
+                            [-sqrt(3)/2, sqrt(3)/2] h about the voxel centre        voxel's middle exact
 entry_kd                    7 bits: steps of S/127 over the values' own range,      S/254
                             S = max(1, largest value)
 entry_ks                    8 bits, likewise                                        S/510
 entry_shininess             8 bits of log2(1 + n), likewise, S = log2(1 + largest)  log2(1 + n) within S/510
 density                     F (see below), plus D - F in 3 bits of A_v              min(D - F, A_v / 14)
 ==========================  ======================================================  ===============================
+
+**Copying from a neighbour** (version 3). A leaf, a blade or a bar that
+crosses several voxels leaves in each an entry with the same sample
+direction, mean normal and material. An entry whose quantised normal,
+normal length, kd, ks and shininess codes all equal those of the entry with
+the same sample direction in one of the 13 neighbouring voxels that come
+before its own in cell order (:data:`PARENT_OFFSETS`) names that neighbour in
+``entry_parent`` and stores none of them: those members hold the other
+entries' codes only. This is lossless on the codes (each entry decodes to
+exactly what quantising it alone gives); about half the tree's entries copy.
+The decoder follows the parents to each chain's first entry by pointer
+jumping (a few NumPy passes, not a loop over entries). Such an entry's
+centroid lies on its source's plane when their facets are coplanar, so its
+depth code is stored as the difference from the depth of the source's plane
+in its own voxel (mostly 0).
 
 A range's two ends decode exactly, so a scene of one material keeps it
 exactly (two: both).
@@ -45,8 +63,10 @@ and deflates to nearly nothing; ``bits.density = 0`` drops it (``D = F``).
 Every field's quantiser is a pair of functions here (``_encode_*`` and
 ``_decode_*``); :func:`encode` and :func:`decode` run them all. A code array
 of b bits is one uint8 (b <= 8) or uint16 array, stored as byte planes (all
-low bytes, then all high bytes) so that the mostly empty high bytes deflate
-away.
+low bytes, then all high bytes) so that the mostly empty high bytes compress
+away. :func:`decode` also reads version 2's layout (no ``entry_parent``, every
+entry's codes stored, centroids as ``round(62 f)`` per axis of the offset f
+in the voxel).
 
 Registration guarantees what the encoding assumes: coords sorted and inside
 the grid, each voxel's entries sorted by sample direction without repeats,
@@ -73,10 +93,33 @@ ARRAYS = ("origin", "shape", "coords", "directions", "density", "entry_offsets",
           "entry_direction", "entry_area", "entry_kd", "entry_ks", "entry_shininess",
           "entry_centroid", "entry_normal")  # fmt: skip
 
-#: The members of the compact encoding, in the order they are written.
-MEMBERS = ("origin", "shape", "directions", "coords", "entry_mask", "entry_area",
-           "entry_normal", "entry_coherence", "entry_centroid", "entry_kd", "entry_ks",
-           "entry_shininess", "density")  # fmt: skip
+#: The members of the compact encoding of format version 2, in the order they are written.
+MEMBERS_V2 = ("origin", "shape", "directions", "coords", "entry_mask", "entry_area",
+              "entry_normal", "entry_coherence", "entry_centroid", "entry_kd", "entry_ks",
+              "entry_shininess", "density")  # fmt: skip
+#: The members of the compact encoding (format version 3): version 2's and
+#: ``entry_parent``, which lets an entry take its normal and materials from a
+#: neighbour's (:func:`_copy_parents`); the fields it names are then stored
+#: for the other entries only.
+MEMBERS = (*MEMBERS_V2[:5], "entry_parent", *MEMBERS_V2[5:])
+#: Fields (members) an entry with a parent copies from it instead of storing.
+COPIED = ("entry_normal", "entry_coherence", "entry_kd", "entry_ks", "entry_shininess")
+
+#: The field of :class:`Bits` each copied member's codes have.
+_BITS_OF = {"entry_normal": "normal", "entry_coherence": "coherence", "entry_kd": "kd", "entry_ks": "ks",
+            "entry_shininess": "shininess"}  # fmt: skip
+
+#: The 13 neighbours (di, dj, dk) of a voxel that come before it in cell-key
+#: order (faces first, then edges, then corners): ``entry_parent`` j > 0
+#: names the entry with the same sample direction in the voxel at
+#: ``PARENT_OFFSETS[j - 1]`` from the entry's own.
+PARENT_OFFSETS = np.array(
+    sorted(
+        ((i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1) if (i, j, k) < (0, 0, 0)),
+        key=lambda o: (abs(o[0]) + abs(o[1]) + abs(o[2]), [-x for x in o[::-1]]),
+    ),
+    dtype=np.int64,
+)
 
 #: Areas below ``max area / 2**AREA_SPAN`` are stored as that (an absolute
 #: error below 6e-8 of the largest entry's area): keeps the log range, and so
@@ -96,21 +139,25 @@ class Bits:
     ``density`` 0 stores no residual: the density sphere is then derived
     from the entries alone. Each count lies in 1..16 (2..16 for ``area``, whose
     code 0 means a zero area, ``normal``, a signed coordinate, and
-    ``centroid``, whose steps number ``2**bits - 2``).
+    ``centroid``, a signed coordinate, and ``depth``). ``centroid`` is the
+    bits of each of a centroid's two coordinates in the plane of its mean
+    normal, ``depth`` of its offset along that normal (version 2 files stored
+    each axis with ``centroid`` bits and had no ``depth``).
     """
 
-    area: int = 10
-    normal: int = 9
+    area: int = 11
+    normal: int = 10
     coherence: int = 6
     centroid: int = 6
     kd: int = 7
     ks: int = 8
     shininess: int = 8
     density: int = 3
+    depth: int = 10
 
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():
-            low = 0 if name == "density" else 2 if name in ("area", "normal", "centroid") else 1
+            low = 0 if name == "density" else 2 if name in ("area", "normal", "centroid", "depth") else 1
             if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= 16:
                 raise InputError(f"bits for '{name}' must be a whole number in {low}..16, got {value!r}")
 
@@ -264,10 +311,12 @@ def _encode_frame(v: np.ndarray, sample: np.ndarray, bits: int, span: float) -> 
     return (np.round(np.clip(scaled, -1.0, 1.0) * m) + m).astype(np.uint16)
 
 
-def _decode_frame(codes: np.ndarray, sample: np.ndarray, bits: int, span: float) -> np.ndarray:
+def _decode_frame(codes: np.ndarray, sample: np.ndarray, bits: int, span: float, frame=None) -> np.ndarray:
+    """The inverse of :func:`_encode_frame`; ``frame`` is ``tangent_frame(sample)``
+    when already known (a sample direction's rows, gathered)."""
     m = 2 ** (bits - 1) - 1
     g = (codes.astype(np.float64) - m) / m * span
-    t, b = tangent_frame(sample)
+    t, b = tangent_frame(sample) if frame is None else frame
     v = sample + g[0][:, None] * t + g[1][:, None] * b
     return v / np.linalg.norm(v, axis=1, keepdims=True)
 
@@ -297,14 +346,52 @@ def _deflated(codes: np.ndarray, bits: int) -> int:
     return len(zlib.compress(to_planes(codes, _width(bits)).tobytes()))
 
 
-def _decode_normal(codes: np.ndarray, length: np.ndarray, length_range: list, bits: Bits, span: float | None,
-                   sample: np.ndarray) -> np.ndarray:  # fmt: skip
+def _decode_unit_normal(codes: np.ndarray, bits: Bits, span: float | None, sample: np.ndarray,
+                        frame=None) -> np.ndarray:  # fmt: skip
+    """(E, 3) float64 unit normals from their direction codes (2, E)."""
+    if span is None:
+        return _decode_oct(codes, oct_bits(bits))
+    return _decode_frame(codes, sample, bits.normal, span, frame)
+
+
+def _encode_spread(length: np.ndarray, bits: int) -> np.ndarray:
+    """(1, E) codes of mean normal lengths c in [0, 1] (version 3):
+    ``round(sqrt(1 - c) * (2**bits - 1))``. The volume's sheets bend by
+    ``sqrt(1 - c)`` (``aniso3d.rendering.volume.entry_sheets``), steepest
+    near c = 1, where smooth surfaces are: this spends the steps there (at 6
+    bits, codes about 1/63**2 apart in c near 1, where linear steps were
+    1/63; the largest error, near c = 0, about 1/63). c = 1 and c = 0 are
+    exact."""
+    top = 2**bits - 1
+    spread = np.clip(1.0 - np.asarray(length, dtype=np.float64), 0.0, 1.0)
+    return np.round(np.sqrt(spread) * top).astype(np.uint16)[None]
+
+
+def _decode_spread(codes: np.ndarray, bits: int) -> np.ndarray:
+    return 1.0 - (np.atleast_2d(codes)[0].astype(np.float64) / (2**bits - 1)) ** 2
+
+
+def _decode_normal(
+    codes: np.ndarray | None,
+    length: np.ndarray,
+    length_range: list | None,
+    bits: Bits,
+    span: float | None,
+    sample: np.ndarray | None,
+    unit: np.ndarray | None = None,
+) -> np.ndarray:
     """(E, 3) float32 mean normals from their direction codes (2, E), in the
-    sample frame (``span``) or octahedral (``span`` None), and length codes
-    (1, E) on ``length_range``. float32 as built; F is computed from these
-    very values by encoder and decoder, so that decoded D >= F exactly."""
-    unit = _decode_oct(codes, oct_bits(bits)) if span is None else _decode_frame(codes, sample, bits.normal, span)
-    scale = _decode_range(np.atleast_2d(length), bits.coherence, length_range)[0]
+    sample frame (``span``) or octahedral (``span`` None), or their unit
+    directions ``unit`` when already decoded, and length codes (1, E): of
+    :func:`_encode_spread` when ``length_range`` is None (version 3), else
+    on ``length_range`` (version 2). float32 as built; F is computed from
+    these very values by encoder and decoder, so that decoded D >= F exactly."""
+    if unit is None:
+        unit = _decode_unit_normal(codes, bits, span, sample)
+    if length_range is None:
+        scale = _decode_spread(length, bits.coherence)
+    else:
+        scale = _decode_range(np.atleast_2d(length), bits.coherence, length_range)[0]
     return (unit * scale[:, None]).astype(np.float32)
 
 
@@ -356,8 +443,9 @@ def _decode_unit(codes: np.ndarray, bits: int, scale: float) -> np.ndarray:
 
 
 def _encode_centroid(centroid, origin, voxel_size, coords, voxel, bits) -> np.ndarray:
-    """(3, E) codes of each centroid's offset f in [0, 1] inside its voxel,
-    per axis: ``round(f * n)`` with ``n = 2**bits - 2`` (even), so the voxel's
+    """Version 2's centroids (read by :func:`decode`, no longer written):
+    (3, E) codes of each centroid's offset f in [0, 1] inside its voxel, per
+    axis: ``round(f * n)`` with ``n = 2**bits - 2`` (even), so the voxel's
     faces and middle plane (0, 1/2, 1: axis-aligned surfaces) are exact and
     the rest within ``h / 2n``."""
     f = (np.asarray(centroid, dtype=np.float64) - origin) / voxel_size - coords[voxel]
@@ -368,6 +456,81 @@ def _encode_centroid(centroid, origin, voxel_size, coords, voxel, bits) -> np.nd
 def _decode_centroid(codes, origin, voxel_size, coords, voxel, bits) -> np.ndarray:
     f = codes.T.astype(np.float64) / (2**bits - 2)
     return origin + (coords[voxel] + f) * voxel_size
+
+
+def _steps(bits: int) -> tuple[int, int]:
+    """(m, s) of a signed coordinate in the centroid's normal frame: codes
+    ``m + round(x s)`` in 0..2m for x in [-sqrt(3)/2, sqrt(3)/2] (a voxel's
+    half diagonal), ``m = 2**(bits-1) - 1`` and ``s`` the largest even number
+    with ``s sqrt(3)/2 <= m``: 0 and +-1/2 (the voxel's middle and faces)
+    are exact. (2 bits: ``s = 1``, codes -1, 0, 1 voxel, clamped into it.)"""
+    m = 2 ** (bits - 1) - 1
+    return m, max(1, 2 * math.floor(m / math.sqrt(3.0)))
+
+
+def _frame_offsets(codes: np.ndarray, unit: np.ndarray, t: np.ndarray, b: np.ndarray, bits: Bits) -> np.ndarray:
+    """(E, 3) offsets from the voxel centre, in voxels, of centroid codes
+    (3, E) (depth along the unit normal, then the two tangent coordinates
+    along ``t`` and ``b``, :func:`~aniso3d.grid.tangent_frame` of it),
+    clamped into the voxel."""
+    md, sd = _steps(bits.depth)
+    mp, sp = _steps(bits.centroid)
+    d = (codes[0].astype(np.float64) - md) / sd
+    u = (codes[1].astype(np.float64) - mp) / sp
+    v = (codes[2].astype(np.float64) - mp) / sp
+    return np.clip(d[:, None] * unit + u[:, None] * t + v[:, None] * b, -0.5, 0.5)
+
+
+def _depth_codes(f: np.ndarray, unit: np.ndarray, bits: int) -> np.ndarray:
+    """Depth codes (E,) int64 of offsets ``f`` (E, 3) from the voxel centre along ``unit`` (E, 3)."""
+    m, s = _steps(bits)
+    return m + np.clip(np.round(np.sum(f * unit, axis=1) * s), -m, m).astype(np.int64)
+
+
+def _encode_centroid_frame(centroid, origin, voxel_size, coords, voxel, unit, parent_src, bits) -> np.ndarray:
+    """(3, E) codes of each centroid in its entry's normal frame (version 3):
+    its offset from the voxel centre along the decoded unit normal ``unit``
+    (``bits.depth`` bits, within h sqrt(3) / 4 s), and in the plane
+    (``bits.centroid`` bits a coordinate). Depth is what the volume's sheets
+    and the splats' depth need; the tangent coordinates only slide a splat
+    in its plane. An entry with a parent (``parent_src``, its source entry, is
+    not itself) lies on its source's plane when their facets are coplanar
+    (a leaf across voxels): its depth is stored as the difference, modulo
+    ``2**bits.depth``, from the depth of that plane in its voxel."""
+    f = (np.asarray(centroid, dtype=np.float64) - origin) / voxel_size - coords[voxel] - 0.5
+    f = np.clip(f, -0.5, 0.5)
+    mp, sp = _steps(bits.centroid)
+    t, b = tangent_frame(unit)
+    codes = np.empty((3, len(f)), dtype=np.int64)
+    codes[0] = _depth_codes(f, unit, bits.depth)
+    codes[1] = mp + np.clip(np.round(np.sum(f * t, axis=1) * sp), -mp, mp)
+    codes[2] = mp + np.clip(np.round(np.sum(f * b, axis=1) * sp), -mp, mp)
+    child = np.flatnonzero(parent_src != np.arange(len(f)))
+    if len(child):
+        root = parent_src[child]
+        # The sources' centroids as decoded, seen from each child's voxel.
+        at = _frame_offsets(codes[:, root], unit[root], t[root], b[root], bits)
+        at += coords[voxel[root]] - coords[voxel[child]]
+        codes[0, child] = (codes[0, child] - _depth_codes(at, unit[child], bits.depth)) % 2**bits.depth
+    return codes.astype(np.uint16)
+
+
+def _decode_centroid_frame(codes, origin, voxel_size, coords, voxel, unit, tb, parent_src, bits) -> np.ndarray:
+    """The inverse of :func:`_encode_centroid_frame`; ``tb`` is
+    :func:`~aniso3d.grid.tangent_frame` of ``unit``."""
+    t, b = tb
+    codes = codes.astype(np.int64)
+    child = np.flatnonzero(parent_src != np.arange(codes.shape[1]))
+    if len(child):
+        root = parent_src[child]
+        at = _frame_offsets(codes[:, root], unit[root], t[root], b[root], bits)
+        at += coords[voxel[root]] - coords[voxel[child]]
+        codes[0, child] = (codes[0, child] + _depth_codes(at, unit[child], bits.depth)) % 2**bits.depth
+    md, _ = _steps(bits.depth)
+    mp, _ = _steps(bits.centroid)
+    if codes.size and (int(codes[0].max()) > 2 * md or int(codes[1:].max()) > 2 * mp):
+        raise FormatError("entry_centroid holds codes past the voxel")
+    return origin + (coords[voxel] + 0.5 + _frame_offsets(codes, unit, t, b, bits)) * voxel_size
 
 
 def facet_density(area: np.ndarray, normal: np.ndarray, offsets: np.ndarray, directions: np.ndarray) -> np.ndarray:
@@ -392,6 +555,78 @@ def _add_rows(out: np.ndarray, rows: np.ndarray, values: np.ndarray) -> None:
     """``out[rows] += values`` for sorted ``rows`` with repeats (reduceat, not add.at)."""
     starts = np.flatnonzero(np.diff(rows, prepend=-1))
     out[rows[starts]] += np.add.reduceat(values, starts, axis=0)
+
+
+# ------------------------------------------------------------ copy prediction
+
+
+def _entry_keys(coords: np.ndarray, shape: np.ndarray, voxel: np.ndarray, direction: np.ndarray, k: int):
+    """(E,) int64 ``cell key * K + sample direction`` of each entry: sorted,
+    as entries are sorted by cell and then by direction."""
+    return cell_keys(coords, shape)[voxel] * k + np.asarray(direction, dtype=np.int64)
+
+
+def _neighbour_entries(coords, shape, voxel, direction, k, ekeys, offset, which=None) -> np.ndarray:
+    """(E,) (or (len(which),)) index of the entry with the same sample
+    direction in the voxel at ``offset`` from each entry's, -1 where there is none."""
+    sel = slice(None) if which is None else which
+    cell = coords[voxel[sel]] + offset
+    inside = np.all((cell >= 0) & (cell < shape), axis=1)
+    key = cell_keys(np.clip(cell, 0, shape - 1), shape) * k + np.asarray(direction, dtype=np.int64)[sel]
+    i = np.minimum(np.searchsorted(ekeys, key), max(len(ekeys) - 1, 0))
+    hit = inside & (ekeys[i] == key) if len(ekeys) else np.zeros(len(key), bool)
+    return np.where(hit, i, -1)
+
+
+def _copy_parents(coords, shape, voxel, direction, k, fields: list[np.ndarray]) -> np.ndarray:
+    """(E,) uint8 ``entry_parent``: j > 0 when the entry's codes of every
+    array of ``fields`` (each (R, E)) equal those of the entry with the same
+    sample direction in the voxel at ``PARENT_OFFSETS[j - 1]`` (the first such
+    neighbour), else 0. A leaf or a blade crossing several voxels leaves
+    entries with the same normal and material in each: all but the first
+    copy theirs. Neighbours come earlier in cell order, so parents form a forest."""
+    e = len(direction)
+    ekeys = _entry_keys(coords, shape, voxel, direction, k)
+    codes = np.vstack([np.atleast_2d(f) for f in fields]) if fields else np.zeros((0, e))
+    parent = np.zeros(e, dtype=np.uint8)
+    for j, offset in enumerate(PARENT_OFFSETS, start=1):
+        open_ = np.flatnonzero(parent == 0)
+        if not len(open_):
+            break
+        nb = _neighbour_entries(coords, shape, voxel, direction, k, ekeys, offset, open_)
+        has = nb >= 0
+        cand, nb = open_[has], nb[has]
+        same = np.all(codes[:, cand] == codes[:, nb], axis=0)
+        parent[cand[same]] = j
+    return parent
+
+
+def _copy_sources(parent: np.ndarray, coords, shape, voxel, direction, k) -> np.ndarray:
+    """(E,) index of the entry whose stored codes each entry takes: itself
+    when ``parent`` is 0, else its parent's source (pointer jumping: about
+    log2 of the longest chain of NumPy passes). Raises FormatError for a
+    parent that names no entry."""
+    e = len(parent)
+    src = np.arange(e, dtype=np.int64)
+    if e and int(parent.max()) > len(PARENT_OFFSETS):
+        raise FormatError(f"entry_parent holds codes above {len(PARENT_OFFSETS)}")
+    child = np.flatnonzero(parent)
+    if not len(child):
+        return src
+    ekeys = _entry_keys(coords, shape, voxel, direction, k)
+    nb = np.empty(len(child), dtype=np.int64)
+    pj = parent[child].astype(np.int64) - 1
+    for j in np.unique(pj):
+        sel = np.flatnonzero(pj == j)
+        nb[sel] = _neighbour_entries(coords, shape, voxel, direction, k, ekeys, PARENT_OFFSETS[j], child[sel])
+    if np.any(nb < 0):
+        raise FormatError("entry_parent names a neighbour without an entry in that sample direction")
+    src[child] = nb
+    while True:  # parents come earlier, so this ends (each pass halves every chain)
+        nxt = src[src]
+        if np.array_equal(nxt, src):
+            return src
+        src = nxt
 
 
 # ------------------------------------------------------------------- the whole
@@ -452,7 +687,10 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
     # A zero mean normal (facets that cancel) has no direction: any will do.
     sample = dirs[np.asarray(arrays["entry_direction"], dtype=np.int64)]
     unit = np.where((length > 0)[:, None], normal / np.where(length > 0, length, 1.0)[:, None], sample)
-    coherence_codes, coherence_range = _encode_range(np.minimum(length, 1.0), bits.coherence)
+    coherence_codes = _encode_spread(np.minimum(length, 1.0), bits.coherence)
+    # (version 2 stored lengths on their own range; the range written says
+    # the codes' limit, and version 3 decodes them with _decode_spread)
+    coherence_range = [[0.0, 1.0, 2**bits.coherence - 1]]
     kd_codes, kd_range = _encode_range(np.asarray(arrays["entry_kd"]).T, bits.kd)
     ks_codes, ks_range = _encode_range(arrays["entry_ks"], bits.ks)
     sh_codes, sh_range = _encode_range(arrays["entry_shininess"], bits.shininess, log=True)
@@ -482,18 +720,28 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
         "entry_area": to_planes(area_codes, _width(bits.area)),
         "entry_normal": to_planes(normal_codes, _width(bits.normal)),
         "entry_coherence": to_planes(coherence_codes, _width(bits.coherence)),
-        "entry_centroid": to_planes(
-            _encode_centroid(arrays["entry_centroid"], origin, float(voxel_size), coords, voxel, bits.centroid),
-            _width(bits.centroid),
-        ),
         "entry_kd": to_planes(kd_codes, _width(bits.kd)),
         "entry_ks": to_planes(ks_codes, _width(bits.ks)),
         "entry_shininess": to_planes(sh_codes, _width(bits.shininess)),
     }
+    direction = np.asarray(arrays["entry_direction"], dtype=np.int64)
+    copied = {"entry_normal": normal_codes, "entry_coherence": coherence_codes, "entry_kd": kd_codes,
+              "entry_ks": ks_codes, "entry_shininess": sh_codes}  # fmt: skip
+    parent = _copy_parents(coords, shape, voxel, direction, k, [copied[n] for n in COPIED])
+    members["entry_parent"] = parent
+    src = _copy_sources(parent, coords, shape, voxel, direction, k)
+    unit_dec = _decode_unit_normal(normal_codes, bits, span, sample)
+    centroid_codes = _encode_centroid_frame(arrays["entry_centroid"], origin, float(voxel_size), coords, voxel,
+                                            unit_dec, src, bits)  # fmt: skip
+    members["entry_centroid"] = to_planes(centroid_codes, _width(max(bits.centroid, bits.depth)))
+    roots = parent == 0
+    for n in COPIED:
+        members[n] = to_planes(np.atleast_2d(copied[n])[:, roots], _width(getattr(bits, _BITS_OF[n])))
+    members = {n: members[n] for n in MEMBERS if n in members}
     if bits.density:
         # The residual against F of the *decoded* entries: what decode adds back.
         area = _decode_log(area_codes, bits.area, area_span)
-        nrm = _decode_normal(normal_codes, coherence_codes, coherence_range, bits, span, sample)
+        nrm = _decode_normal(normal_codes, coherence_codes, None, bits, span, sample)
         f = facet_density(area, nrm, offsets, dirs)
         a_v = np.bincount(voxel, weights=area, minlength=len(coords))
         residual = np.asarray(arrays["density"], dtype=np.float64) - f
@@ -503,7 +751,8 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
     return members, params
 
 
-def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float) -> dict[str, np.ndarray]:
+def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, version: int = 3
+           ) -> dict[str, np.ndarray]:
     """The texture arrays (every name of :data:`ARRAYS`, dtypes as
     :func:`~aniso3d.build.texture.build_texture` makes them) of a compact
     encoding. Raises :class:`~aniso3d.errors.FormatError` naming what does
@@ -543,8 +792,20 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float) -> d
     e = len(direction)
     voxel = np.repeat(np.arange(m), np.diff(offsets))
 
+    if version >= 3:
+        parent = _uint8(members, "entry_parent", (e,))
+        src = _copy_sources(parent, coords.astype(np.int64), shape, voxel, direction, k)
+        # A copied member holds the codes of entries without a parent, in
+        # order: entry i takes row rank[src[i]] of it. Decoded for those
+        # entries only, then gathered.
+        roots = np.flatnonzero(parent == 0)
+        take = (np.cumsum(parent == 0) - 1)[src]
+    else:
+        src, roots, take = None, np.arange(e), np.arange(e)
+
     def codes(name: str, rows: int, b: int) -> np.ndarray:
-        planes = _uint8(members, name, (rows * _width(b), e))
+        n = len(roots) if name in COPIED else e
+        planes = _uint8(members, name, (rows * _width(b), n))
         c = from_planes(planes, rows, _width(b))
         if c.size and int(c.max()) >= 2**b:
             raise FormatError(f"{name} holds codes above {b} bits")
@@ -552,18 +813,30 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float) -> d
 
     area = _decode_log(codes("entry_area", 1, bits.area)[0], bits.area, area_span)
     nb = bits.normal if span is not None else oct_bits(bits)
-    normal = _decode_normal(codes("entry_normal", 2, nb), codes("entry_coherence", 1, bits.coherence),
-                            ranges["coherence"], bits, span, dirs[direction])  # fmt: skip
-    centroid_codes = codes("entry_centroid", 3, bits.centroid)
-    if centroid_codes.size and int(centroid_codes.max()) > 2**bits.centroid - 2:
-        raise FormatError("entry_centroid holds codes past the voxel")
-    centroid = _decode_centroid(
-        centroid_codes, origin, float(voxel_size), coords.astype(np.int64), voxel,
-        bits.centroid,
-    )  # fmt: skip
-    kd = _decode_range(codes("entry_kd", 3, bits.kd), bits.kd, ranges["kd"]).T
-    ks = _decode_range(codes("entry_ks", 1, bits.ks), bits.ks, ranges["ks"])[0]
-    sh = _decode_range(codes("entry_shininess", 1, bits.shininess), bits.shininess, ranges["shininess"], log=True)[0]
+    # tangent frames of the K sample directions, gathered (not one per entry)
+    frame = tuple(x[direction[roots]] for x in tangent_frame(dirs)) if span is not None else None
+    unit = _decode_unit_normal(codes("entry_normal", 2, nb), bits, span, dirs[direction[roots]], frame)
+    length_range = None if version >= 3 else ranges["coherence"]
+    normal = _decode_normal(None, codes("entry_coherence", 1, bits.coherence), length_range, bits, span,
+                            None, unit)[take]  # fmt: skip
+    if version >= 3:
+        # The tangent frames of the entries that store a normal, gathered like it.
+        tb = tuple(x[take] for x in tangent_frame(unit))
+        centroid = _decode_centroid_frame(codes("entry_centroid", 3, max(bits.centroid, bits.depth)), origin,
+                                          float(voxel_size), coords.astype(np.int64), voxel, unit[take], tb, src,
+                                          bits)  # fmt: skip
+    else:
+        centroid_codes = codes("entry_centroid", 3, bits.centroid)
+        if centroid_codes.size and int(centroid_codes.max()) > 2**bits.centroid - 2:
+            raise FormatError("entry_centroid holds codes past the voxel")
+        centroid = _decode_centroid(
+            centroid_codes, origin, float(voxel_size), coords.astype(np.int64), voxel,
+            bits.centroid,
+        )  # fmt: skip
+    kd = _decode_range(codes("entry_kd", 3, bits.kd), bits.kd, ranges["kd"]).T[take]
+    ks = _decode_range(codes("entry_ks", 1, bits.ks), bits.ks, ranges["ks"])[0][take]
+    sh = _decode_range(codes("entry_shininess", 1, bits.shininess), bits.shininess, ranges["shininess"],
+                       log=True)[0][take]  # fmt: skip
     density = facet_density(area, normal, offsets, dirs)
     if bits.density:
         w = _width(bits.density)

@@ -19,7 +19,7 @@ finer one (:mod:`aniso3d.build.pyramid`); :func:`entry_points` uses them to
 put points on the true surface. The ``.a3d`` file is
 :mod:`aniso3d.build.texture_file`'s business, and how it quantises the
 fields :mod:`aniso3d.build.encoding`'s: in memory the arrays stay float
-(:attr:`AnisoTexture.memory_nbytes`), stored they take about 1/12 of that
+(:attr:`AnisoTexture.memory_nbytes`), stored they take about 1/16 of that
 (:attr:`AnisoTexture.nbytes`).
 """
 
@@ -39,7 +39,7 @@ from aniso3d.build.clip import Grid, make_grid
 from aniso3d.build.encoding import ARRAYS, DEFAULT_BITS, Bits, decode, encode
 from aniso3d.build.mesh import Mesh
 from aniso3d.build.points import PointCloud
-from aniso3d.build.texture_file import encoded_size, read_texture_file, write_texture_file
+from aniso3d.build.texture_file import FORMAT_VERSION, encoded_size, read_texture_file, write_texture_file
 from aniso3d.errors import FormatError, InputError
 from aniso3d.grid import cell_keys, ranges, tangent_frame
 
@@ -90,6 +90,8 @@ def sphere_directions(k: int, kind: str = "fibonacci", seed: int = 0) -> np.ndar
 #: encoding (loaded from a compact file, or :meth:`AnisoTexture.as_stored`):
 #: its centroids and normals carry the encoding's rounding, which the volume
 #: renderer's sheet crossings allow for (:func:`aniso3d.rendering.volume.entry_sheets`).
+#: Its value is the file's format version (2 or 3; ``True`` in textures saved
+#: before version 3, which came from version 2 files): how fine the rounding is.
 QUANTISED = "quantised"
 
 
@@ -204,8 +206,8 @@ class AnisoTexture:
     @cached_property
     def nbytes(self) -> int:
         """Bytes of the texture as stored and shipped: the size of the ``.a3d``
-        file :meth:`save` writes by default (format version 2, compact
-        encoding, deflated; :mod:`aniso3d.build.encoding`), computed in memory
+        file :meth:`save` writes by default (format version 3, compact
+        encoding, LZMA-compressed; :mod:`aniso3d.build.encoding`), computed in memory
         once. :attr:`memory_nbytes` is the size of the arrays in memory."""
         return encoded_size(self._arrays(), self.voxel_size, self.meta)
 
@@ -215,7 +217,7 @@ class AnisoTexture:
         quantised and decoded; see :mod:`aniso3d.build.encoding` for the
         error of each)."""
         members, params = encode(self._arrays(), self.voxel_size, bits)
-        return AnisoTexture(voxel_size=self.voxel_size, meta={**self.meta, QUANTISED: True},
+        return AnisoTexture(voxel_size=self.voxel_size, meta={**self.meta, QUANTISED: FORMAT_VERSION},
                             **decode(members, params, self.voxel_size))  # fmt: skip
 
     def _arrays(self) -> dict[str, np.ndarray]:
@@ -265,7 +267,7 @@ class AnisoTexture:
         with a SHA-256 of the arrays); loads without pickle. Written atomically.
 
         ``encoding="compact"`` (default) quantises every field with ``bits``
-        (:mod:`aniso3d.build.encoding`: about 1/12 of :attr:`memory_nbytes`
+        (:mod:`aniso3d.build.encoding`: about 1/16 of :attr:`memory_nbytes`
         for the default tree, with stated error bounds); ``"exact"`` keeps
         the arrays bit for bit (deflated).
         """
@@ -280,7 +282,7 @@ class AnisoTexture:
         """Read a file written by :meth:`save` (any version up to the current
         one); refuse foreign, damaged or newer files."""
         f = read_texture_file(path)
-        meta = {**f.meta, QUANTISED: True} if f.encoding == "compact" else f.meta
+        meta = {**f.meta, QUANTISED: f.version} if f.encoding == "compact" else f.meta
         try:
             return cls(voxel_size=f.voxel_size, meta=meta, **f.arrays)
         except FormatError as exc:

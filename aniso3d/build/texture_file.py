@@ -9,11 +9,15 @@ fixed compression level).
 
 Versions:
 
-- **2** (written): the header names an *encoding*. ``"compact"`` (the
+- **3** (written): the header names an *encoding*. ``"compact"`` (the
   default) stores the members of :func:`aniso3d.build.encoding.encode`,
-  quantised, and the numbers :func:`~aniso3d.build.encoding.decode` needs
-  (``params``, inside the checksum); ``"exact"`` stores the texture's arrays
-  as they are. Members are deflated.
+  quantised and predicted from neighbouring voxels, LZMA-compressed, and the
+  numbers :func:`~aniso3d.build.encoding.decode` needs (``params``, inside
+  the checksum); ``"exact"`` stores the texture's arrays as they are,
+  deflated.
+- **2** (read only): as 3, but the compact members are version 2's
+  (:data:`~aniso3d.build.encoding.MEMBERS_V2`: no copying from neighbours,
+  centroids per axis) and deflated.
 - **1** (read only): the texture's arrays as they are, not compressed.
 
 This module knows the container only: which arrays a texture has and what
@@ -28,6 +32,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import lzma
 import os
 import zipfile
 import zlib
@@ -37,7 +42,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-from aniso3d.build.encoding import ARRAYS, DEFAULT_BITS, MEMBERS, Bits, decode, encode
+from aniso3d.build.encoding import ARRAYS, DEFAULT_BITS, MEMBERS, MEMBERS_V2, Bits, decode, encode
 from aniso3d.build.mesh import check_readable_file
 from aniso3d.errors import FormatError, InputError
 from aniso3d.files import atomic_write
@@ -47,8 +52,8 @@ __all__ = ["ARRAYS", "ENCODINGS", "FORMAT_NAME", "FORMAT_VERSION", "TextureFile"
 
 FORMAT_NAME = "aniso3d-texture"
 #: The version written; every version from 1 up to it is read.
-FORMAT_VERSION = 2
-#: The encodings of version 2: quantised (default) or the arrays as they are.
+FORMAT_VERSION = 3
+#: The encodings of versions 2 and 3: quantised (default) or the arrays as they are.
 ENCODINGS = ("compact", "exact")
 REBUILD = "rebuild it from its mesh ('aniso3d build MESH -o out.a3d')"
 
@@ -81,7 +86,7 @@ def write_texture_file(
     bits: Bits = DEFAULT_BITS,
 ) -> Path:
     """Write ``arrays`` (every name of :data:`ARRAYS`) with the voxel size and
-    the JSON-representable part of ``meta``, atomically, as format version 2
+    the JSON-representable part of ``meta``, atomically, as format version 3
     in ``encoding`` ("compact", quantised with ``bits``, or "exact"), streamed
     into the file. The texture is encoded before the file is touched, so a
     texture that cannot be encoded leaves no file behind."""
@@ -127,8 +132,9 @@ def _write_zip(fh: BinaryIO, members: dict[str, np.ndarray], header: dict) -> No
     # Streamed into the file: no second copy of the arrays in memory.
     with zipfile.ZipFile(fh, "w") as zf:
         zf.writestr(_member("header.json"), json.dumps(header, indent=1))
+        lzma = header["encoding"] == "compact"
         for n, a in members.items():
-            with zf.open(_member(n + ".npy", deflate=True), "w", force_zip64=a.nbytes > 2**30) as out:
+            with zf.open(_member(n + ".npy", deflate=True, lzma=lzma), "w", force_zip64=a.nbytes > 2**30) as out:
                 np.save(out, a, allow_pickle=False)
 
 
@@ -149,7 +155,7 @@ def read_texture_file(path: str | os.PathLike) -> TextureFile:
             header = json.loads(zf.read("header.json"))
         except KeyError:
             raise FormatError(f"'{p}' is a zip file but not an aniso3d texture (no header.json)") from None
-        except (ValueError, zipfile.BadZipFile, OSError, EOFError, zlib.error) as exc:
+        except (ValueError, zipfile.BadZipFile, OSError, EOFError, zlib.error, lzma.LZMAError) as exc:
             raise FormatError(f"'{p}' has a damaged header: {exc}; {REBUILD}") from None
         if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:
             got = header.get("format") if isinstance(header, dict) else type(header).__name__
@@ -170,7 +176,7 @@ def read_texture_file(path: str | os.PathLike) -> TextureFile:
                 )
             if not isinstance(params, dict):
                 raise FormatError(f"'{p}' has a damaged header: params is not an object; {REBUILD}")
-        names = ARRAYS if encoding == "exact" else _compact_members(params)
+        names = ARRAYS if encoding == "exact" else _compact_members(params, version)
         members = {}
         for n in names:
             try:
@@ -180,7 +186,7 @@ def read_texture_file(path: str | os.PathLike) -> TextureFile:
                     members[n] = np.lib.format.read_array(member, allow_pickle=False)
             except KeyError:
                 raise FormatError(f"'{p}' is missing array '{n}'; the file is damaged: {REBUILD}") from None
-            except (ValueError, zipfile.BadZipFile, OSError, EOFError, zlib.error) as exc:
+            except (ValueError, zipfile.BadZipFile, OSError, EOFError, zlib.error, lzma.LZMAError) as exc:
                 raise FormatError(f"'{p}' is damaged ({type(exc).__name__}: {exc}); {REBUILD}") from None
     signed = _signed(encoding, params) if version >= 2 else None
     if _digest(members, signed) != header.get("sha256"):
@@ -193,7 +199,7 @@ def read_texture_file(path: str | os.PathLike) -> TextureFile:
         raise FormatError(f"'{p}' has a damaged header: meta is not an object; {REBUILD}")
     if encoding == "compact":
         try:
-            arrays = decode(members, params, float(voxel_size))
+            arrays = decode(members, params, float(voxel_size), version)
         except FormatError as exc:
             raise FormatError(f"'{p}' is damaged: {exc}; {REBUILD}") from None
     else:
@@ -201,32 +207,34 @@ def read_texture_file(path: str | os.PathLike) -> TextureFile:
     return TextureFile(arrays, float(voxel_size), meta, version, encoding)
 
 
-def _compact_members(params: dict) -> tuple[str, ...]:
-    """The members a compact file must hold: all of :data:`MEMBERS`, but
-    ``density`` only when its residual is stored."""
+def _compact_members(params: dict, version: int) -> tuple[str, ...]:
+    """The members a compact file of ``version`` must hold: all of
+    :data:`MEMBERS` (version 2: :data:`MEMBERS_V2`), but ``density`` only
+    when its residual is stored."""
     bits = params.get("bits")
     stored = not isinstance(bits, dict) or bits.get("density", 1) != 0
-    return tuple(n for n in MEMBERS if n != "density" or stored)
+    return tuple(n for n in (MEMBERS if version >= 3 else MEMBERS_V2) if n != "density" or stored)
 
 
-def _member(name: str, deflate: bool = False) -> zipfile.ZipInfo:
+def _member(name: str, deflate: bool = False, lzma: bool = False) -> zipfile.ZipInfo:
     """A zip entry with a fixed timestamp (and zlib's default level when
-    deflated), so equal textures give equal files."""
+    deflated, LZMA's default preset with ``lzma``), so equal textures give
+    equal files."""
     info = zipfile.ZipInfo(name, date_time=(1980, 1, 1, 0, 0, 0))
     info.external_attr = 0o600 << 16
     if deflate:
-        info.compress_type = zipfile.ZIP_DEFLATED
+        info.compress_type = zipfile.ZIP_LZMA if lzma else zipfile.ZIP_DEFLATED
     return info
 
 
 def _signed(encoding: str, params: dict) -> str:
-    """The header values the checksum covers besides the arrays (version 2)."""
+    """The header values the checksum covers besides the arrays (versions 2 and 3)."""
     return json.dumps({"encoding": encoding, "params": params}, sort_keys=True)
 
 
 def _digest(arrays: dict[str, np.ndarray], signed: str | None = None) -> str:
     """SHA-256 over each array's name, dtype, shape and bytes, in name order,
-    then (version 2) the encoding and its parameters."""
+    then (versions 2 and 3) the encoding and its parameters."""
     h = hashlib.sha256()
     for n in sorted(arrays):
         a = np.ascontiguousarray(arrays[n])

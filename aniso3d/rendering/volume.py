@@ -148,6 +148,12 @@ SHEET_EPS = 1e-3
 #: slip between neighbouring voxels' rounded planes (up to -4.5 dB on a
 #: sphere); chosen on the corpus with demos/bench_encoding.py (docs/encoding.md).
 SHEET_QUANTISED = 0.02
+#: The same for a texture of format version 3 or later (``meta["quantised"]``
+#: 3): its centroids' depth along the normal is exact to h/1180 and its normal
+#: lengths are stored finely near 1 (where :data:`SHEET_BEND` is steep), so
+#: its sheets need less: chosen on ten scenes with demos/bench_encoding.py
+#: and a sweep (docs/encoding.md).
+SHEET_QUANTISED_V3 = 0.005
 #: Extra crossing tolerance per unit spread of an entry's normals (see
 #: :class:`EntrySheets`).
 SHEET_BEND = 1.0
@@ -480,10 +486,13 @@ def entry_sheets(texture: AnisoTexture, voxels: np.ndarray | None = None) -> Ent
     share = _ramp(np.maximum(own, together[owner]), SHEET_FILL)
     spread = np.clip(1.0 - np.linalg.norm(n, axis=1), 0.0, 1.0)
     slack = SHEET_EPS + SHEET_BEND * np.sqrt(spread) * np.clip(1.0 - spread / SHEET_BEND_MAX, 0.0, 1.0)
-    if texture.meta.get(QUANTISED):
+    quantised = texture.meta.get(QUANTISED)
+    if quantised:
         # Rounded centroids and normals move neighbouring voxels' planes apart
-        # by up to a few 1e-2 voxel where they meet: sheets widen by that.
-        slack = slack + SHEET_QUANTISED * share
+        # by up to a few 1e-2 voxel where they meet (version 2; a few 1e-3 in
+        # version 3, whose files say 3): sheets widen by that.
+        fine = not isinstance(quantised, bool) and isinstance(quantised, int) and quantised >= 3
+        slack = slack + (SHEET_QUANTISED_V3 if fine else SHEET_QUANTISED) * share
     # Fill and share as the GPU stores them (float16): where the sheets bring
     # a ray's transmittance to about 0.5, its depth hangs on the last digit.
     fill = np.clip(fill, 0.0, 1.0).astype(np.float16).astype(np.float64)
