@@ -99,8 +99,14 @@ def test_a_failing_encoder_never_replaces_the_old_video(tmp_path, monkeypatch):
     """imageio-ffmpeg ignores ffmpeg's exit status: the file is read back."""
     pytest.importorskip("imageio_ffmpeg")
     fake = tmp_path / "ffmpeg"
-    fake.write_text("#!/bin/sh\ncat > /dev/null\nfor last; do :; done\necho truncated > \"$last\"\nexit 1\n")
+    # It writes a bad file where it is told to, and "truncated" on standard
+    # output when asked to read one back ("-": the pipe, not a file here).
+    fake.write_text(
+        "#!/bin/sh\ncat > /dev/null\nfor last; do :; done\n"
+        "if [ \"$last\" = - ]; then echo truncated; else echo truncated > \"$last\"; fi\nexit 1\n"
+    )
     fake.chmod(0o755)
+    monkeypatch.chdir(tmp_path)  # whatever it writes stays out of the checkout
     old = tmp_path / "kept.mp4"
     old.write_bytes(b"the user's video")
     monkeypatch.setenv("IMAGEIO_FFMPEG_EXE", str(fake))
