@@ -87,9 +87,11 @@ def main() -> None:
     try:  # the code measured: the commit checked out when the run starts
         commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                                 check=True).stdout.strip()  # fmt: skip
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], capture_output=True,
-                               text=True, check=True).stdout.strip()  # fmt: skip
-        commit += " (with uncommitted changes)" if dirty else ""
+        # Only the code counts: a page of docs being edited does not change a figure.
+        code = ["aniso3d", "shaders", "demos"]
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", *code],
+                               capture_output=True, text=True, check=True).stdout.strip()  # fmt: skip
+        commit += " (with uncommitted changes to the code)" if dirty else ""
     except (OSError, subprocess.CalledProcessError):
         commit = "unknown"
     rows = []
