@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import subprocess
 import time
 
 import numpy as np
@@ -30,6 +29,7 @@ import numpy as np
 from aniso3d import metrics
 from aniso3d.bench.corpus import corpus_cameras
 from aniso3d.bench.outputs import markdown_table, write_between_markers
+from aniso3d.bench.run import code_version
 from aniso3d.build import scenes
 from aniso3d.build.texture import build_texture
 from aniso3d.rendering.context import GLContext
@@ -84,16 +84,11 @@ def main() -> None:
     args = ap.parse_args()
 
     started, load0 = time.time(), os.getloadavg()
-    try:  # the code measured: the commit checked out when the run starts
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                                check=True).stdout.strip()  # fmt: skip
-        # Only the code counts: a page of docs being edited does not change a figure.
-        code = ["aniso3d", "shaders", "demos"]
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", *code],
-                               capture_output=True, text=True, check=True).stdout.strip()  # fmt: skip
-        commit += " (with uncommitted changes to the code)" if dirty else ""
-    except (OSError, subprocess.CalledProcessError):
-        commit = "unknown"
+    # The code measured: the commit checked out when the run starts, and
+    # whether the code (not the docs being edited) differed from it.
+    version = code_version(("aniso3d", "shaders", "demos"))
+    commit = (version["commit"] or "unknown")[:7]
+    commit += " (with uncommitted changes to the code)" if version["dirty"] else ""
     rows = []
     with GLContext("auto") as gl, Renderer((args.size, args.size), gl=gl) as renderer:
         gl_name = gl.renderer

@@ -99,15 +99,17 @@ def loadavg() -> tuple[float, float, float] | None:
     return float(one), float(five), float(fifteen)
 
 
-def code_version() -> dict:
+def code_version(paths: tuple[str, ...] = ()) -> dict:
     """Which code measured: the git commit of the package's checkout (None when
-    it is not one) and whether tracked files differed from it."""
+    it is not one) and whether tracked files differed from it (only those
+    under ``paths``, folders from the checkout's top, when given)."""
     where = Path(__file__).resolve().parent
     out: dict = {"commit": None, "dirty": None}
     try:
         run = {"cwd": where, "capture_output": True, "text": True, "timeout": 10, "check": True}
         out["commit"] = subprocess.run(["git", "rev-parse", "HEAD"], **run).stdout.strip() or None
-        status = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], **run).stdout
+        spec = ["--", *(f":/{p}" for p in paths)] if paths else []
+        status = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", *spec], **run).stdout
         out["dirty"] = bool(status.strip())
     except (OSError, subprocess.SubprocessError):
         pass

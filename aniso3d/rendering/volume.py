@@ -600,7 +600,8 @@ def sheet_terms(
         sh, at = sheets, rows
     c, n = _entry_colors(texture, w, lighting, normal, rows)
     area = np.asarray(texture.entry_area, dtype=np.float64)[rows]
-    share = sheet_share(sh.share[at], np.broadcast_to(voxel_pixels, (V,))[owner])
+    pixels = np.broadcast_to(np.asarray(voxel_pixels, dtype=np.float64), (V,))[owner]
+    share = sheet_share(sh.share[at], pixels)
     nh, a_s, fill = sh.normal[at], share * sh.area[at], share * sh.fill[at]
     nw = nh @ w
     projected = np.bincount(owner, a_s * np.abs(nw), minlength=V)
@@ -617,7 +618,6 @@ def sheet_terms(
         with np.errstate(divide="ignore", invalid="ignore"):
             t_hit = np.where(nw != 0, -s_in / nw, 0.0)
         t_hit = np.clip(t_hit, 0.0, np.asarray(chords, np.float64)[owner])
-        pixels = np.broadcast_to(np.asarray(voxel_pixels, dtype=np.float64), (V,))[owner]
         with np.errstate(divide="ignore"):
             foot = np.zeros(len(rows)) if edges == "sampled" else 1.0 / pixels
         surface = (foot > 0.0) & (sh.share[at] >= RUN_SHARE) & (a_s > 0)
@@ -790,6 +790,7 @@ def trace_ray_np(
     for k, ((v, ti, chord, _), D, col) in enumerate(zip(hits, dens, cols, strict=True)):
         if T <= T_MIN:
             break
+        steep = False  # the centre ray crosses one of this voxel's surface sheets steeply
         if run is not None and ti > run["end"] + RUN_GAP:
             close_run()  # the GPU closes it on its way to this voxel
             if T <= T_MIN:
@@ -817,6 +818,7 @@ def trace_ray_np(
                     # had left uncovered before this voxel; the side is
                     # whether the ray meets each as it met the run's first.
                     e = {key: val[mine] for key, val in st.run.items()}
+                    steep = bool(((e["hit"] > 0.0) & (np.abs(e["nw"]) >= RUN_STEEP)).any())
                     if run is None:
                         run = {"ref": e["normal"][0], "band": np.zeros(2), "hit": np.zeros(2),
                                "col": np.zeros(3), "w": 0.0, "tw": 0.0}  # fmt: skip
@@ -832,7 +834,6 @@ def trace_ray_np(
                     run["w"] += open_ * float(e["counted"].sum())
                     run["tw"] += open_ * float(e["counted"] @ (e["t"] + ti))
                     run["end"] = ti + chord
-                    run["steep"] = bool(((e["hit"] > 0.0) & (np.abs(e["nw"]) >= RUN_STEEP)).any())
                 # Sheet and cloud share the facets: their coverages add.
                 a_s = min(st.crossed[k], 1.0)
                 t_after = T * max(0.0, keep_f - a_s)
@@ -842,8 +843,8 @@ def trace_ray_np(
                 col = (a_s * st.sheet_color[k] + a_f * st.cloud_color[k]) / (a_s + a_f)
         # A run crossed whole on one side, steeply, is settled (volume.frag).
         settled = (
-            run is not None and st is not None and opacity == "planar" and bool((st.run["voxel"] == k).any())
-            and run["steep"] and (run["hit"][0] >= 1.0) != (run["hit"][1] >= 1.0) and min(run["hit"]) == 0.0
+            steep and run is not None
+            and (run["hit"][0] >= 1.0) != (run["hit"][1] >= 1.0) and min(run["hit"]) == 0.0
         )  # fmt: skip
         if not seg > 0.0:
             if settled:
