@@ -56,7 +56,7 @@ vec3 g_light_dir[4];
 // Injected by render/volume.py: BRICK (brick edge in voxels), ALPHA_MAX
 // (coverage cap below 1 so the optical depth stays finite), T_MIN (early
 // termination; T_MIN_PLAIN in the plain marching), BIG (stands for an
-// infinite ray parameter), RUN_SHARE, RUN_GAP, RUN_PARALLEL and RUN_STEEP
+// infinite ray parameter), RUN_SHARE, RUN_GAP, RUN_PARALLEL, RUN_STEEP and RUN_GRAZE
 // (the runs of surface sheets: render/volume.py:sheet_terms).
 
 uniform vec2 u_size;
@@ -185,7 +185,9 @@ float crossing_fraction(float lo, float hi, float half_w) {
 // it, as at a silhouette's far side). Where the centre ray crosses sheets on
 // one side only (a surface cut by voxel faces, a corner), their fills,
 // whole; elsewhere (a near miss, or through both sides of a silhouette) the
-// share of the footprint's rays that cross the side they cross most.
+// share of the footprint's rays that cross the side they cross most. A
+// crossing at |n.w| < RUN_GRAZE (a closed surface's tangent, where the side
+// falls either way as rounding goes) is on both sides.
 // Mirrors render/volume.py:run_coverage. close_run() composites the open
 // run as one layer, its colour and depth those of its sheets each weighted
 // by what it counts times what the run had left uncovered before its voxel
@@ -358,7 +360,8 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                         float same = abs(along) >= RUN_PARALLEL ? nw * dot(g_run_ref, g_d) * along : 1.0;
                         int side = same >= 0.0 ? 0 : 1;
                         g_run_band[side] += band;
-                        g_run_hit[side] += hit ? fill : 0.0;
+                        if (hit && abs(nw) < RUN_GRAZE) g_run_hit += vec2(fill);
+                        else g_run_hit[side] += hit ? fill : 0.0;
                         steep = steep || (hit && abs(nw) >= RUN_STEEP);
                         g_run_col += run_open * counted * c;
                         g_run_w += run_open * counted;

@@ -25,7 +25,7 @@ entry_normal (length) c     6 bits of sqrt(1 - c), steps of 1/63                
 entry_centroid              in the frame of the decoded normal: depth along it,     depth h/1180 (10 bits),
                             10 bits, and two tangent coordinates, 6 bits each, on   h/68 in the plane; the
                             [-sqrt(3)/2, sqrt(3)/2] h about the voxel centre        voxel's middle exact
-entry_kd                    7 bits: steps of S/127 over the values' own range,      S/254
+entry_kd                    9 bits: steps of S/511 over the values' own range,      S/1022
                             S = max(1, largest value)
 entry_ks                    8 bits, likewise                                        S/510
 entry_shininess             8 bits of log2(1 + n), likewise, S = log2(1 + largest)  log2(1 + n) within S/510
@@ -149,7 +149,7 @@ class Bits:
     normal: int = 10
     coherence: int = 6
     centroid: int = 6
-    kd: int = 7
+    kd: int = 9
     ks: int = 8
     shininess: int = 8
     density: int = 3
