@@ -183,9 +183,10 @@ float crossing_fraction(float lo, float hi, float half_w) {
 // The open run's coverage. Its sheets lie on the side where the ray met
 // the first one (entering a surface) or on the side turned back (leaving
 // it, as at a silhouette's far side). Where the centre ray crosses sheets on
-// one side only (a surface cut by voxel faces, a corner), their fills,
-// whole; elsewhere (a near miss, or through both sides of a silhouette) the
-// share of the footprint's rays that cross the side they cross most. A
+// the entering side only (a surface cut by voxel faces, a corner), their
+// fills, whole; elsewhere (a near miss, through both sides of a silhouette,
+// or on the far side only: a tangent's rounded planes) the share of the
+// footprint's rays that cross the side they cross most. A
 // crossing at |n.w| < RUN_GRAZE (a closed surface's tangent, where the side
 // falls either way as rounding goes) is on both sides.
 // Mirrors render/volume.py:run_coverage. close_run() composites the open
@@ -194,7 +195,7 @@ float crossing_fraction(float lo, float hi, float half_w) {
 // (the front-most surface's), and closes it.
 float run_coverage() {
     float cov = max(g_run_band.x, g_run_band.y);
-    if ((g_run_hit.x > 0.0) != (g_run_hit.y > 0.0)) cov = max(cov, max(g_run_hit.x, g_run_hit.y));
+    if (g_run_hit.x > 0.0 && !(g_run_hit.y > 0.0)) cov = max(cov, g_run_hit.x);
     return clamp(cov, 0.0, 1.0);
 }
 
@@ -430,10 +431,9 @@ void composite(int v, vec3 x_in, float t0, float chord) {
             color = (a_s * cs + a_f * cf) / (a_s + a_f);
         }
     }
-    // A run crossed whole on one side, steeply, is settled: its far side
+    // A run crossed whole on its entering side, steeply, is settled: its far side
     // could only follow within RUN_GAP through an object under a voxel thick.
-    bool settled = steep && ((g_run_hit.x >= 1.0) != (g_run_hit.y >= 1.0))
-                   && min(g_run_hit.x, g_run_hit.y) == 0.0;
+    bool settled = steep && g_run_hit.x >= 1.0 && g_run_hit.y == 0.0;
     if (!(seg > 0.0)) {
         if (settled) close_run();
         return;

@@ -215,11 +215,12 @@ def test_crossing_fraction_is_the_footprint_share_in_the_interval():
 
 
 def test_run_coverage_rules():
-    """Crossed on one side only: the fills, whole (a surface, a corner);
-    crossed on both sides (through a silhouette) or not at all (a near
-    miss): the larger side's footprint share, not their sum."""
+    """Crossed on the entering side only: the fills, whole (a surface, a
+    corner); crossed on both sides (through a silhouette), on the far side
+    only (a ray that never entered: a tangent's rounding) or not at all (a
+    near miss): the larger side's footprint share, not their sum."""
     assert run_coverage(np.array([0.3, 0.0]), np.array([1.0, 0.0])) == 1.0
-    assert run_coverage(np.array([0.2, 0.4]), np.array([0.0, 1.0])) == 1.0
+    assert run_coverage(np.array([0.2, 0.4]), np.array([0.0, 1.0])) == pytest.approx(0.4)
     assert run_coverage(np.array([0.3, 0.0]), np.array([0.6, 0.0])) == pytest.approx(0.6)
     assert run_coverage(np.array([0.35, 0.3]), np.array([1.0, 1.0])) == pytest.approx(0.35)
     assert run_coverage(np.array([0.2, 0.15]), np.zeros(2)) == pytest.approx(0.2)

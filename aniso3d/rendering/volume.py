@@ -198,8 +198,8 @@ RUN_GAP = 1.0
 #: for the near and far sides of a silhouette; one across it (the two faces
 #: of a corner or of a box's edge) is on the first side.
 RUN_PARALLEL = 0.5
-#: A run whose centre ray crosses whole fills on one side only, one of them
-#: at ``|n . w|`` at least this, closes at once: its far side could only
+#: A run whose centre ray crosses whole fills on its entering side only, one
+#: of them at ``|n . w|`` at least this, closes at once: its far side could only
 #: follow within :data:`RUN_GAP` through an object under a voxel thick
 #: (a surface of curvature radius R voxels is crossed twice within a voxel
 #: or two only at ``|n . w|`` below about 1 / R), so the ray stops there.
@@ -570,14 +570,15 @@ def run_coverage(band: np.ndarray, hit: np.ndarray) -> float:
     and the side turned back (leaving it, as at a silhouette's far side;
     :data:`RUN_PARALLEL`). ``band``: the fills times the footprint's shares
     crossing them; ``hit``: the fills of those the centre ray crosses. Where
-    it crosses sheets on one side only (a surface cut by voxel faces, a
-    corner), their fills, whole; elsewhere (a near miss, or through both
-    sides of a silhouette) the share of the footprint that crosses the side
-    it crosses most. A grazing crossing (:data:`RUN_GRAZE`) is on both
-    sides. Mirrors volume.frag."""
+    it crosses sheets on the entering side only (a surface cut by voxel
+    faces, a corner), their fills, whole; elsewhere (a near miss, through
+    both sides of a silhouette, or on the far side only, which a ray that
+    never entered meets only where a tangent's planes were rounded) the
+    share of the footprint that crosses the side it crosses most. A grazing
+    crossing (:data:`RUN_GRAZE`) is on both sides. Mirrors volume.frag."""
     cov = float(np.max(band))
-    if (hit[0] > 0.0) != (hit[1] > 0.0):
-        cov = max(cov, float(np.max(hit)))
+    if hit[0] > 0.0 and not hit[1] > 0.0:
+        cov = max(cov, float(hit[0]))
     return min(max(cov, 0.0), 1.0)
 
 
@@ -862,10 +863,10 @@ def trace_ray_np(
             a_s, a_f = min(a_s, 1.0), 1.0 - keep_f
             if a_s + a_f > 0.0:
                 col = (a_s * st.sheet_color[k] + a_f * st.cloud_color[k]) / (a_s + a_f)
-        # A run crossed whole on one side, steeply, is settled (volume.frag).
+        # A run crossed whole on its entering side, steeply, is settled (volume.frag).
         settled = (
             steep and run is not None
-            and (run["hit"][0] >= 1.0) != (run["hit"][1] >= 1.0) and min(run["hit"]) == 0.0
+            and run["hit"][0] >= 1.0 and run["hit"][1] == 0.0
         )  # fmt: skip
         if not seg > 0.0:
             if settled:
