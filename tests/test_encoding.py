@@ -306,7 +306,7 @@ def assert_within_bounds(tex: AnisoTexture, got: AnisoTexture, bits: Bits = DEFA
 def test_tree_through_a_file_is_within_every_bound(tree_tex, tree_file):
     back = AnisoTexture.load(tree_file)
     f = read_texture_file(tree_file)
-    assert f.version == FORMAT_VERSION == 3 and f.encoding == "compact"
+    assert f.version == FORMAT_VERSION == 4 and f.encoding == "compact"
     with zipfile.ZipFile(tree_file) as zf:
         assert {i.compress_type for i in zf.infolist() if i.filename.endswith(".npy")} == {zipfile.ZIP_LZMA}
     # the file holds exactly what as_stored() computes without one
@@ -314,7 +314,7 @@ def test_tree_through_a_file_is_within_every_bound(tree_tex, tree_file):
     for name in ARRAYS:
         a, b = getattr(back, name), getattr(ref, name)
         assert a.dtype == b.dtype and np.array_equal(a, b), name
-    assert back.meta == {**tree_tex.meta, QUANTISED: 3} and back.voxel_size == tree_tex.voxel_size
+    assert back.meta == {**tree_tex.meta, QUANTISED: 4} and back.voxel_size == tree_tex.voxel_size
     assert_within_bounds(tree_tex, back)
 
 
@@ -492,7 +492,7 @@ def _set(name, fn):
 
 
 DAMAGED = [
-    ("future version", dict(header=lambda h: h.update(version=4)), "version 4.*Upgrade aniso3d.*aniso3d build"),
+    ("future version", dict(header=lambda h: h.update(version=5)), "version 5.*Upgrade aniso3d.*aniso3d build"),
     ("unknown encoding", dict(header=lambda h: h.update(encoding="zstd")), "encoding 'zstd'.*Upgrade aniso3d"),
     ("params not an object", dict(header=lambda h: h.update(params=[1])), "params is not an object"),
     ("bits missing", dict(header=lambda h: h["params"].pop("bits")), "encoding parameters are damaged"),

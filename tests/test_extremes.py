@@ -24,6 +24,7 @@ import numpy as np
 import pytest
 
 from aniso3d import AnisoTexture, Mesh, PointCloud, build_texture, scenes, sphere_directions
+from aniso3d.build.closure import hidden_density
 from aniso3d.build.texture import estimate_build_bytes
 from aniso3d.rendering.camera import Camera
 from aniso3d.rendering.lighting import Light, Lighting, shade_np
@@ -76,9 +77,12 @@ def projected_area_per_direction(mesh: Mesh, directions: np.ndarray) -> np.ndarr
 def assert_conservation(tex: AnisoTexture, mesh: Mesh, rtol: float = 1e-11):
     """The identity of registration: sum_v D_v(p) h^2 = sum_f A_f |N_f . N_p|
     for every sample p, and the registered area is the mesh's area. Rounding of
-    float64 sums over ~1e5 terms stays far below 1e-11 of the total area."""
+    float64 sums over ~1e5 terms stays far below 1e-11 of the total area. D as
+    registered: the texture's density plus what closed surfaces hide of
+    themselves in their voxels, from the closed sums kept with it."""
     total = mesh.area()
-    got = tex.density.sum(axis=0) * tex.voxel_size**2
+    registered = tex.density + hidden_density(tex.entry_offsets, tex.directions, tex.entry_closed_normal)
+    got = registered.sum(axis=0) * tex.voxel_size**2
     want = projected_area_per_direction(mesh, tex.directions)
     assert np.all(np.abs(got - want) <= rtol * total), np.abs(got - want).max() / total
     assert abs(tex.total_area() - total) <= rtol * total
@@ -97,13 +101,15 @@ def entry_area_by_voxel(tex: AnisoTexture) -> dict[tuple, float]:
 
 def test_resolution_1_is_one_voxel_holding_everything():
     # A closed unit cube in one voxel: seen from any direction w its facets
-    # cover the voxel twice (front and back), D(w) = 2 P(w) exactly.
+    # cover the voxel twice (front and back), sum A |n . w| = 2 P(w); its
+    # back hides behind its front (aniso3d.build.closure): D(w) = P(w)
+    # exactly, the voxel's own shadow.
     cube = scenes.cube(1.0, center=(0.5, 0.5, 0.5))
     tex = build_texture(cube, 1, 64)
     assert tex.shape.tolist() == [1, 1, 1] and tex.coords.tolist() == [[0, 0, 0]]
     assert tex.voxel_size == 1.0
     p = np.abs(tex.directions).sum(axis=1)
-    np.testing.assert_allclose(tex.density[0], 2 * p, rtol=1e-14)
+    np.testing.assert_allclose(tex.density[0], p, rtol=1e-14)
     assert tex.entry_area.sum() == pytest.approx(6.0, rel=1e-15)
     # the tree too: one voxel, all of it, the identity holds
     tree = small_tree()
@@ -114,14 +120,19 @@ def test_resolution_1_is_one_voxel_holding_everything():
 
 def test_resolution_2_splits_a_cube_into_eight_half_covered_voxels():
     # Each of the 8 voxels holds three quarter-faces of area h^2 with normals
-    # along x, y and z: D_v(w) = |w_x| + |w_y| + |w_z| = P(w), coverage 1.
+    # along x, y and z, pointing to its corner s (entries of +-1): registered,
+    # D_v(w) = |w_x| + |w_y| + |w_z| = P(w), coverage 1; less what the faces
+    # hide of each other (aniso3d.build.closure), D_v(w) = (P(w) + |s . w|) / 2.
     cube = scenes.cube(1.0, center=(0.5, 0.5, 0.5))
     tex = build_texture(cube, 2, 64)
     assert tex.shape.tolist() == [2, 2, 2] and tex.n_voxels == 8
     p = np.abs(tex.directions).sum(axis=1)
-    np.testing.assert_allclose(tex.density, np.broadcast_to(p, (8, 64)), rtol=1e-14)
+    corner = np.where(tex.coords > 0, 1.0, -1.0)
+    np.testing.assert_allclose(tex.density, (p + np.abs(corner @ tex.directions.T)) / 2, rtol=1e-13)
+    registered = tex.density + hidden_density(tex.entry_offsets, tex.directions, tex.entry_closed_normal)
+    np.testing.assert_allclose(registered, np.broadcast_to(p, (8, 64)), rtol=1e-14)
     for d in tex.directions[[0, 17, 40, 63]]:  # coverage reads the sample nearest w
-        np.testing.assert_allclose(tex.coverage(d), 1.0, rtol=1e-14)
+        np.testing.assert_allclose(tex.coverage(d), (1 + np.abs(corner @ d) / np.abs(d).sum()) / 2, rtol=1e-13)
     np.testing.assert_allclose(list(entry_area_by_voxel(tex).values()), 3.0, rtol=1e-15)
 
 

@@ -70,6 +70,7 @@ def assert_same_texture(agg: AnisoTexture, direct: AnisoTexture) -> None:
         ref = np.asarray(getattr(direct, name), np.float64)
         _mean_close(getattr(agg, name), ref, area, 2.5e-7 * max(float(np.abs(ref).max()), 1e-30))
     _mean_close(agg.entry_normal, direct.entry_normal, area, 2.5e-7)
+    np.testing.assert_allclose(agg.entry_cover, direct.entry_cover, atol=1e-6)
     assert agg.entry_kd.dtype == np.float32 and agg.entry_normal.dtype == np.float32
 
 

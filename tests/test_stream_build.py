@@ -108,11 +108,13 @@ def test_merges_in_any_grouping_are_exact(mesh, one_pass):
     grid = make_grid(mesh.bounds, RES)
     dirs = sphere_directions(16)
     src = MeshSource(mesh)
-    parts = [stream.chunk_partial(src.read(a, b), grid, dirs) for a, b in stream.plan_chunks(mesh.n_faces, 150)]
+    src.find_closed()
+    parts = [stream.chunk_partial(stream.read_chunk(src, a, b), grid, dirs)
+             for a, b in stream.plan_chunks(mesh.n_faces, 150)]  # fmt: skip
     left = stream.merge_partials(stream.merge_partials(*parts[:3]), *parts[3:])
     right = stream.merge_partials(*parts[::-1])
     for p in (left, right):
-        arrays = stream.finalize_partial(p, grid, 16)
+        arrays = stream.finalize_partial(p, grid, dirs)
         for name in ("density", "entry_area", "entry_centroid", "entry_kd", "entry_normal", "coords"):
             assert np.array_equal(arrays[name], getattr(one_pass, name)), name
 

@@ -408,15 +408,18 @@ def test_window_switches_renderers_rotates_on_drag_resizes_and_quits(xserver, tm
             if m.group(1) != "showing":
                 pytest.fail(f"the {method} renderer did not draw in the viewer; log:\n{s.log()}")
             img = s.screenshot()
-            if method == "volume":
-                # An opaque cube's volume rendering is close to its polygons, so
-                # "the image changed" is no test: it must be the volume's image.
-                expected = headless_view(scenes.cube(), (400, 300), method="volume", resolution=16)
-                if expected is not None:
+            # An opaque cube's volume and splat renderings are close to its
+            # polygons, so "the image changed" is no test: it must be the
+            # renderer's image, nearer the headless renderer's than the
+            # polygons (the volume: the same to 0.5 levels; the splats,
+            # measured: 0.55 from it and 0.90 from the polygons).
+            expected = headless_view(scenes.cube(), (400, 300), method=method, resolution=16)
+            if expected is not None:
+                if method == "volume":
                     assert mean_diff(img, expected) < 0.5, "the viewer's volume differs from the headless volume"
-                    assert mean_diff(img, expected) < mean_diff(img, mesh), "the viewer still shows the polygons"
+                assert mean_diff(img, expected) < mean_diff(img, mesh), "the viewer still shows the polygons"
             else:
-                assert mean_diff(img, mesh) > 1, f"switching to {method} did not change the image"
+                assert mean_diff(img, mesh) > 0.2, f"switching to {method} did not change the image"
             assert drawn(img) > 0.5 * drawn(mesh), f"the {method} renderer drew too little"
             images[method] = img
         assert mean_diff(images["volume"], images["splat"]) > 0.5

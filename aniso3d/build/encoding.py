@@ -84,6 +84,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from aniso3d.build.closure import facet_density
 from aniso3d.errors import FormatError, InputError
 from aniso3d.grid import cell_coords, cell_keys, tangent_frame
 
@@ -91,7 +92,9 @@ from aniso3d.grid import cell_coords, cell_keys, tangent_frame
 #: that hold arrays), what :func:`decode` returns and version 1 files store as they are.
 ARRAYS = ("origin", "shape", "coords", "directions", "density", "entry_offsets",
           "entry_direction", "entry_area", "entry_kd", "entry_ks", "entry_shininess",
-          "entry_centroid", "entry_normal")  # fmt: skip
+          "entry_centroid", "entry_normal", "entry_cover")  # fmt: skip
+#: The arrays of files before format version 4 (no ``entry_cover``: read as 1).
+ARRAYS_V3 = ARRAYS[:-1]
 
 #: The members of the compact encoding of format version 2, in the order they are written.
 MEMBERS_V2 = ("origin", "shape", "directions", "coords", "entry_mask", "entry_area",
@@ -101,7 +104,9 @@ MEMBERS_V2 = ("origin", "shape", "directions", "coords", "entry_mask", "entry_ar
 #: ``entry_parent``, which lets an entry take its normal and materials from a
 #: neighbour's (:func:`_copy_parents`); the fields it names are then stored
 #: for the other entries only.
-MEMBERS = (*MEMBERS_V2[:5], "entry_parent", *MEMBERS_V2[5:])
+MEMBERS_V3 = (*MEMBERS_V2[:5], "entry_parent", *MEMBERS_V2[5:])
+#: Version 4's: version 3's and ``entry_cover``.
+MEMBERS = (*MEMBERS_V3, "entry_cover")
 #: Fields (members) an entry with a parent copies from it instead of storing.
 COPIED = ("entry_normal", "entry_coherence", "entry_kd", "entry_ks", "entry_shininess")
 
@@ -128,8 +133,6 @@ AREA_SPAN = 24.0
 #: Mean normals are stored about their sample direction (:func:`_encode_frame`)
 #: when none lies farther than this from it, in degrees; else octahedral.
 FRAME_MAX_ANGLE = 60.0
-#: Entries' decoded F(p) are summed in batches of this many entries (E x K products).
-DENSITY_BATCH = 1 << 18
 
 
 @dataclass(frozen=True)
@@ -154,10 +157,13 @@ class Bits:
     shininess: int = 8
     density: int = 3
     depth: int = 10
+    cover: int = 4
 
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():
             low = 0 if name == "density" else 2 if name in ("area", "normal", "centroid", "depth") else 1
+            if name == "cover" and value > 8:
+                raise InputError(f"bits for 'cover' must be a whole number in 1..8, got {value!r}")
             if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= 16:
                 raise InputError(f"bits for '{name}' must be a whole number in {low}..16, got {value!r}")
 
@@ -442,6 +448,19 @@ def _decode_unit(codes: np.ndarray, bits: int, scale: float) -> np.ndarray:
     return codes.astype(np.float64) / (2**bits - 1) * scale
 
 
+def _encode_cover(cover: np.ndarray, bits: int) -> np.ndarray:
+    """(1, E) codes ``round(2 (1 - c) (2**bits - 1))`` of covers c in [0.5, 1]
+    (clamped): 0 for the open facets' 1, so a scene without closed thin
+    parts stores a member of zeros."""
+    top = 2**bits - 1
+    c = np.clip(np.asarray(cover, dtype=np.float64), 0.5, 1.0)
+    return np.round(2.0 * (1.0 - c) * top).astype(np.uint8)[None]
+
+
+def _decode_cover(codes: np.ndarray, bits: int) -> np.ndarray:
+    return 1.0 - codes[0].astype(np.float64) / (2.0 * (2**bits - 1))
+
+
 def _encode_centroid(centroid, origin, voxel_size, coords, voxel, bits) -> np.ndarray:
     """Version 2's centroids (read by :func:`decode`, no longer written):
     (3, E) codes of each centroid's offset f in [0, 1] inside its voxel, per
@@ -533,30 +552,6 @@ def _decode_centroid_frame(codes, origin, voxel_size, coords, voxel, unit, tb, p
     return origin + (coords[voxel] + 0.5 + _frame_offsets(codes, unit, t, b, bits)) * voxel_size
 
 
-def facet_density(area: np.ndarray, normal: np.ndarray, offsets: np.ndarray, directions: np.ndarray) -> np.ndarray:
-    """(M, K) float64 ``F_v(p) = sum_e A_e |n_e . N_p|`` over each voxel's
-    entries: the density sphere as far as the entries' areas (E,) and mean
-    normals (E, 3) know it (exact for flat entries, never above the true
-    density). Summed in batches of :data:`DENSITY_BATCH` entries."""
-    m, k = len(offsets) - 1, len(directions)
-    out = np.zeros((m, k))
-    voxel = np.repeat(np.arange(m), np.diff(offsets))
-    dirs = np.asarray(directions, dtype=np.float64)
-    for start in range(0, len(area), DENSITY_BATCH):
-        stop = min(len(area), start + DENSITY_BATCH)
-        part = np.abs(np.asarray(normal[start:stop], dtype=np.float64) @ dirs.T) * np.asarray(
-            area[start:stop], dtype=np.float64
-        )[:, None]
-        _add_rows(out, voxel[start:stop], part)
-    return out
-
-
-def _add_rows(out: np.ndarray, rows: np.ndarray, values: np.ndarray) -> None:
-    """``out[rows] += values`` for sorted ``rows`` with repeats (reduceat, not add.at)."""
-    starts = np.flatnonzero(np.diff(rows, prepend=-1))
-    out[rows[starts]] += np.add.reduceat(values, starts, axis=0)
-
-
 # ------------------------------------------------------------ copy prediction
 
 
@@ -638,7 +633,7 @@ def _check_shapes(arrays: dict[str, np.ndarray]) -> None:
     e = len(arrays["entry_direction"])
     want = {"origin": (3,), "shape": (3,), "coords": (m, 3), "directions": (k, 3), "density": (m, k),
             "entry_offsets": (m + 1,), "entry_area": (e,), "entry_kd": (e, 3), "entry_ks": (e,),
-            "entry_shininess": (e,), "entry_centroid": (e, 3), "entry_normal": (e, 3)}  # fmt: skip
+            "entry_shininess": (e,), "entry_centroid": (e, 3), "entry_normal": (e, 3), "entry_cover": (e,)}  # fmt: skip
     for name, shape in want.items():
         got = np.shape(arrays[name])
         if got != shape:
@@ -737,12 +732,14 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
     roots = parent == 0
     for n in COPIED:
         members[n] = to_planes(np.atleast_2d(copied[n])[:, roots], _width(getattr(bits, _BITS_OF[n])))
+    cover_codes = _encode_cover(arrays["entry_cover"], bits.cover)
+    members["entry_cover"] = cover_codes
     members = {n: members[n] for n in MEMBERS if n in members}
     if bits.density:
         # The residual against F of the *decoded* entries: what decode adds back.
         area = _decode_log(area_codes, bits.area, area_span)
         nrm = _decode_normal(normal_codes, coherence_codes, None, bits, span, sample)
-        f = facet_density(area, nrm, offsets, dirs)
+        f = facet_density(area * _decode_cover(cover_codes, bits.cover), nrm, offsets, dirs)
         a_v = np.bincount(voxel, weights=area, minlength=len(coords))
         residual = np.asarray(arrays["density"], dtype=np.float64) - f
         scale = np.where(a_v > 0, a_v, 1.0)[:, None]
@@ -751,7 +748,7 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
     return members, params
 
 
-def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, version: int = 3
+def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, version: int = 4
            ) -> dict[str, np.ndarray]:
     """The texture arrays (every name of :data:`ARRAYS`, dtypes as
     :func:`~aniso3d.build.texture.build_texture` makes them) of a compact
@@ -837,7 +834,14 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
     ks = _decode_range(codes("entry_ks", 1, bits.ks), bits.ks, ranges["ks"])[0][take]
     sh = _decode_range(codes("entry_shininess", 1, bits.shininess), bits.shininess, ranges["shininess"],
                        log=True)[0][take]  # fmt: skip
-    density = facet_density(area, normal, offsets, dirs)
+    if version >= 4:
+        cover_codes = _uint8(members, "entry_cover", (1, e))
+        if cover_codes.size and int(cover_codes.max()) >= 2**bits.cover:
+            raise FormatError(f"entry_cover holds codes above {bits.cover} bits")
+        cover = _decode_cover(cover_codes, bits.cover)
+    else:
+        cover = np.ones(e)
+    density = facet_density(area * cover, normal, offsets, dirs)
     if bits.density:
         w = _width(bits.density)
         res = from_planes(_uint8(members, "density", (w, m * k)), 1, w)[0].reshape(m, k)
@@ -859,6 +863,7 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
         "entry_shininess": np.maximum(sh, 0.0).astype(np.float32),
         "entry_centroid": centroid,
         "entry_normal": normal,
+        "entry_cover": cover.astype(np.float32),
     }
 
 

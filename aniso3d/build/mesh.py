@@ -118,6 +118,18 @@ class Mesh:
     def area(self) -> float:
         return float(self.face_areas().sum())
 
+    def closed_faces(self) -> np.ndarray:
+        """(F,) bool: faces whose three edges are each shared with exactly one
+        other face, walked the other way (vertices matched by position).
+
+        Such faces lie on a closed, consistently wound surface, locally: a
+        solid's skin. Where its front and back fall into one voxel (a thin
+        beam, a branch, a wall under a voxel thick) the back lies behind the
+        front, and the texture counts it once (:mod:`aniso3d.build.stream`).
+        Open sheets (leaves, blades, strips) have boundary edges and keep
+        every side. See :func:`closed_faces`."""
+        return closed_faces(self.vertices, self.faces)
+
     @property
     def nbytes(self) -> int:
         """Bytes of the mesh as a renderer would hold it: float32 positions,
@@ -409,3 +421,25 @@ def _sample_texture(image, uv: np.ndarray) -> np.ndarray:
     x = np.clip((u * w).astype(np.int64), 0, w - 1)
     y = np.clip(((1.0 - v) * h).astype(np.int64), 0, h - 1)
     return arr[y, x]
+
+
+def closed_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F,) bool: :meth:`Mesh.closed_faces` of ``vertices`` (V, 3) and
+    ``faces`` (F, 3). Degenerate faces (a repeated corner) are not closed."""
+    faces = np.asarray(faces, dtype=np.int64)
+    if len(faces) == 0:
+        return np.zeros(0, dtype=bool)
+    # Vertices at the same position are one (meshes split them along seams).
+    _, same = np.unique(np.asarray(vertices, dtype=np.float64), axis=0, return_inverse=True)
+    f = same.reshape(-1)[faces]
+    a = f.reshape(-1)
+    b = f[:, [1, 2, 0]].reshape(-1)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    n = int(f.max()) + 1
+    key = lo * n + hi
+    _, inverse, count = np.unique(key, return_inverse=True, return_counts=True)
+    # +1 walked low to high, -1 back: an edge shared the other way sums to 0.
+    walk = np.bincount(inverse, weights=np.where(a < b, 1.0, -1.0), minlength=len(count))
+    good = (count == 2) & (walk == 0)
+    edge_ok = good[inverse] & (a != b)
+    return edge_ok.reshape(-1, 3).all(axis=1)

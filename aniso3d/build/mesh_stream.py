@@ -38,6 +38,7 @@ from aniso3d.build.mesh import (
     MAX_SHININESS,
     Mesh,
     check_readable_file,
+    closed_faces,
     load_mesh,
 )
 from aniso3d.build.stream import TriangleChunk
@@ -45,6 +46,9 @@ from aniso3d.errors import InputError
 
 #: Faces per read in a source's bounds pass.
 READ_FACES = 1 << 18
+#: Bytes a face takes while :meth:`TriangleSource.find_closed` runs (its
+#: corners, the edge keys and their sort), for the memory budget.
+CLOSED_BYTES_PER_FACE = 320
 
 
 def _check_finite(xyz: np.ndarray, path: Path) -> None:
@@ -71,6 +75,23 @@ class TriangleSource:
     n_vertices: int = 0
     portable: bool = False
     note: str = ""
+    #: (n_faces,) bool once :meth:`find_closed` found them, else None.
+    closed: np.ndarray | None = None
+
+    def find_closed(self, memory_budget: int | None = None) -> bool:
+        """Find which faces lie on a closed surface
+        (:func:`~aniso3d.build.mesh.closed_faces`, vertices matched by
+        position), reading every triangle once, unless that would take more
+        than ``memory_budget`` bytes (about :data:`CLOSED_BYTES_PER_FACE` a
+        face): then none is taken as closed. True if found."""
+        if self.closed is not None:
+            return True
+        if memory_budget is not None and self.n_faces * CLOSED_BYTES_PER_FACE > memory_budget:
+            return False
+        tri = [self.read(a, min(self.n_faces, a + READ_FACES)).triangles for a in range(0, self.n_faces, READ_FACES)]
+        tri = np.concatenate(tri) if tri else np.zeros((0, 3, 3))
+        self.closed = closed_faces(tri.reshape(-1, 3), np.arange(3 * len(tri)).reshape(-1, 3))
+        return True
 
     def bounds(self) -> np.ndarray:
         """(2, 3) float64 min and max corner of the vertices the faces use."""
@@ -115,6 +136,11 @@ class MeshSource(TriangleSource):
         return TriangleChunk(m.vertices[m.faces[start:stop]], m.kd[start:stop], m.ks[start:stop],
                              m.shininess[start:stop])  # fmt: skip
 
+    def find_closed(self, memory_budget: int | None = None) -> bool:
+        if self.closed is None:
+            self.closed = self.mesh.closed_faces()  # the mesh is in memory already
+        return True
+
 
 class ConcatSource(TriangleSource):
     """Several sources one after the other, as if concatenated."""
@@ -144,6 +170,8 @@ class ConcatSource(TriangleSource):
             return parts[0]
         return TriangleChunk(*(np.concatenate([getattr(p, n) for p in parts])
                                for n in ("triangles", "kd", "ks", "shininess")))  # fmt: skip
+
+
 
 
 class LoadedSource(MeshSource):

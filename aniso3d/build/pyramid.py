@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from aniso3d.build.closure import hidden_density, hidden_sides
 from aniso3d.build.points import PointCloud
 from aniso3d.build.texture import PLACEMENTS, POINT_NORMALS, AnisoTexture, entry_coherence, entry_points
 from aniso3d.errors import InputError
@@ -195,12 +196,18 @@ def coarsen(texture: AnisoTexture) -> tuple[AnisoTexture, np.ndarray]:
     Mp = len(pkeys)
     coords = cell_coords(pkeys, pshape).astype(np.int32)
 
-    # Density: children grouped by parent, summed, rescaled to (2h)^2.
+    # Density: children grouped by parent, summed, rescaled to (2h)^2. With
+    # the closed facets' sums known, the density as registered, from which
+    # what the coarser voxels' solids hide is taken again below.
+    known = t.entry_closed_area is not None
+    dens = np.asarray(t.density)
+    if known:
+        dens = dens + hidden_density(t.entry_offsets, t.directions, t.entry_closed_normal)
     order = np.argsort(parent, kind="stable")
     starts = np.zeros(Mp, dtype=np.int64)
     starts[1:] = np.cumsum(np.bincount(parent, minlength=Mp))[:-1]
     if Mp:
-        density = np.add.reduceat(np.asarray(t.density)[order], starts, axis=0) * 0.25
+        density = np.add.reduceat(dens[order], starts, axis=0) * 0.25
     else:
         density = np.zeros((0, K))
 
@@ -218,6 +225,16 @@ def coarsen(texture: AnisoTexture) -> tuple[AnisoTexture, np.ndarray]:
     origin = np.asarray(t.origin, dtype=np.float64)
     offsets = np.zeros(Mp + 1, dtype=np.int64)
     offsets[1:] = np.cumsum(np.bincount(ekeys // K, minlength=Mp))
+    if known:
+        closed_area = np.bincount(einv, weights=t.entry_closed_area, minlength=E) * 0.25
+        closed_normal = np.stack([np.bincount(einv, weights=t.entry_closed_normal[:, i], minlength=E)
+                                  for i in range(3)], axis=1) * 0.25  # fmt: skip
+        density, cover = hidden_sides(density, offsets, t.directions, area * 0.25, closed_area, closed_normal)
+    else:
+        # What the children's facets cover of their own backs, as a mean: a
+        # coarser voxel holding more of a solid hides more, which this misses.
+        closed_area = closed_normal = None
+        cover = wmean(t.entry_cover).astype(np.float32)
     meta = {k: v for k, v in t.meta.items() if k != "n_subpolygons"}
     meta["lod_level"] = int(t.meta.get("lod_level", 0)) + 1
     coarse = AnisoTexture(
@@ -238,6 +255,9 @@ def coarsen(texture: AnisoTexture) -> tuple[AnisoTexture, np.ndarray]:
         entry_centroid=origin + wmean(np.asarray(t.entry_centroid) - origin),
         entry_normal=wmean(t.entry_normal).astype(np.float32),
         meta=meta,
+        entry_cover=cover,
+        entry_closed_area=closed_area,
+        entry_closed_normal=closed_normal,
     )
     return coarse, parent
 

@@ -56,11 +56,12 @@ import time
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from aniso3d.build.clip import Grid, clip_to_grid, triangle_normals
+from aniso3d.build.closure import hidden_sides
 from aniso3d.errors import InputError, ResourceError
 from aniso3d.grid import cell_coords, cell_keys
 
@@ -69,8 +70,9 @@ from aniso3d.grid import cell_coords, cell_keys
 #: Fractional bits of every exact sum (values in units of h^2).
 FRAC_BITS = 84
 #: Summed columns of a shading entry: S, S (c - cell) (3), S k_d (3), S k_s,
-#: S n, S N (3).
-ENTRY_COLUMNS = 12
+#: S n, S N (3), and of its pieces on closed surfaces (TriangleChunk.closed)
+#: S and S N (3).
+ENTRY_COLUMNS = 16
 #: The Phong exponent is summed as ``S n 2^-14`` (exact scaling), so that
 #: every summed value of a piece inside the grid is small (SMALL_VALUE).
 SHININESS_SCALE = 2.0**-14
@@ -216,12 +218,16 @@ class TriangleChunk:
         kd: (n, 3) float32 diffuse reflectance.
         ks: (n,) float32 specular coefficient.
         shininess: (n,) float32 Phong exponent.
+        closed: (n,) bool, the face lies on a closed surface
+            (:meth:`~aniso3d.build.mesh.Mesh.closed_faces`); None: none does
+            (readers that stream a file never see its topology whole).
     """
 
     triangles: np.ndarray
     kd: np.ndarray
     ks: np.ndarray
     shininess: np.ndarray
+    closed: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.triangles)
@@ -389,8 +395,11 @@ def chunk_partial(
     report(0.9, "register")
     # Per triangle: k_d, k_s, n (scaled by 2^-14, exactly, so that every
     # summed value is small) and the normal: one gather per piece.
+    closed = np.zeros(n) if chunk.closed is None else np.asarray(chunk.closed, dtype=np.float64)
     per_face = np.concatenate([chunk.kd, chunk.ks[:, None], chunk.shininess[:, None] * np.float32(SHININESS_SCALE),
-                               normals], axis=1, dtype=np.float64)  # fmt: skip
+                               normals, closed[:, None], closed[:, None] * normals],
+                              axis=1, dtype=np.float64)  # fmt: skip
+    del closed
 
     def entry(r0: int, r1: int) -> np.ndarray:
         idx = order[r0:r1]
@@ -575,11 +584,15 @@ class Accumulator:
         return self.voxels.nbytes + self.entries.nbytes
 
 
-def finalize(acc: Accumulator, grid: Grid, k: int) -> dict:
+def finalize(acc: Accumulator, grid: Grid, dirs: np.ndarray) -> dict:
     """The texture's arrays (see :class:`aniso3d.build.texture.AnisoTexture`)
-    and counts from exact sums. Sums are converted block by block as the
-    tables drain, into arrays in slot order, then put in key order one array
-    at a time: the peak is about the exact sums, not sums plus texture."""
+    and counts from exact sums over the sample directions ``dirs`` (K, 3),
+    with what thin solids hide of themselves taken out
+    (:func:`aniso3d.build.closure.hidden_sides`). Sums are converted block by
+    block as the tables drain, into arrays in slot order, then put in key
+    order one array at a time: the peak is about the exact sums, not sums
+    plus texture."""
+    k = len(dirs)
     shape = np.asarray(grid.shape)
     vox, ent = acc.voxels, acc.entries
     vkeys, ekeys = vox.keys, ent.keys
@@ -599,6 +612,8 @@ def finalize(acc: Accumulator, grid: Grid, k: int) -> dict:
     ks = np.empty(E, np.float32)
     sh = np.empty(E, np.float32)
     normal = np.empty((E, 3), np.float32)
+    closed_area = np.empty(E)
+    closed_normal = np.empty((E, 3))
     for rows, v in ent.drain():
         a = v[:, 0]
         area[rows] = a
@@ -609,8 +624,11 @@ def finalize(acc: Accumulator, grid: Grid, k: int) -> dict:
         ks[rows] = mean[:, 6]
         sh[rows] = mean[:, 7] / SHININESS_SCALE
         normal[rows] = mean[:, 8:11]
+        closed_area[rows] = v[:, 12]
+        closed_normal[rows] = v[:, 13:16]
         del v, mean
-    area, local, kd, ks, sh, normal = (key_order(x, ent, ordered[1]) for x in (area, local, kd, ks, sh, normal))
+    area, local, kd, ks, sh, normal, closed_area, closed_normal = (
+        key_order(x, ent, ordered[1]) for x in (area, local, kd, ks, sh, normal, closed_area, closed_normal))
     if E and area.max() > MAX_ENTRY_AREA:
         raise ResourceError(
             f"a voxel holds {area.max():.3g} voxel faces' worth of facets facing one direction, more than "
@@ -623,6 +641,7 @@ def finalize(acc: Accumulator, grid: Grid, k: int) -> dict:
     for r0 in range(0, E, step):  # in place: the centroid within its cell -> world
         r = slice(r0, r0 + step)
         local[r] = grid.origin + (cell_coords(evk[r], shape) + local[r]) * grid.voxel_size
+    density, cover = hidden_sides(density, offsets, dirs, area, closed_area, closed_normal)
     return {
         "coords": cell_coords(vkeys, shape).astype(np.int32),
         "density": density,
@@ -634,16 +653,19 @@ def finalize(acc: Accumulator, grid: Grid, k: int) -> dict:
         "entry_shininess": sh,
         "entry_centroid": local,
         "entry_normal": normal,
+        "entry_cover": cover,
+        "entry_closed_area": closed_area,
+        "entry_closed_normal": closed_normal,
         "n_triangles": acc.n_triangles,
         "n_subpolygons": acc.n_subpolygons,
         "mesh_area": exact_to_float(acc.area),
     }
 
 
-def finalize_partial(p: Partial, grid: Grid, k: int) -> dict:
+def finalize_partial(p: Partial, grid: Grid, dirs: np.ndarray) -> dict:
     """:func:`finalize` of one partial (where a Dask reduction ends), with
     the seconds its chunks spent clipping and registering."""
-    arrays = finalize(Accumulator.of(p), grid, k)
+    arrays = finalize(Accumulator.of(p), grid, dirs)
     arrays["seconds"] = dict(p.seconds)
     return arrays
 
@@ -656,9 +678,19 @@ def plan_chunks(n_faces: int, chunk_size: int) -> list[tuple[int, int]]:
     return [(a, min(n_faces, a + chunk_size)) for a in range(0, n_faces, chunk_size)]
 
 
+def read_chunk(source, start: int, stop: int) -> TriangleChunk:
+    """Faces ``start:stop`` of ``source`` with the closed-surface flags the
+    source found before the build (``source.closed``), if any."""
+    chunk = source.read(start, stop)
+    closed = getattr(source, "closed", None)
+    if chunk.closed is None and closed is not None:
+        chunk = replace(chunk, closed=closed[start:stop])
+    return chunk
+
+
 def _source_task(source, start: int, stop: int, grid: Grid, dirs: np.ndarray, batches) -> Partial:
     """A worker reads its own chunk (sources that pickle cheaply: paths)."""
-    return chunk_partial(source.read(start, stop), grid, dirs, batches=batches)
+    return chunk_partial(read_chunk(source, start, stop), grid, dirs, batches=batches)
 
 
 def _chunk_task(chunk: TriangleChunk, grid: Grid, dirs: np.ndarray, batches) -> Partial:
@@ -694,7 +726,6 @@ def run_chunks(
     report = report or (lambda done, extra, stage: None)
     seconds = {} if seconds is None else seconds
     ranges = plan_chunks(source.n_faces, chunk_size)
-    K = len(dirs)
     if client is not None:
         out = _run_dask(source, ranges, grid, dirs, batches, client, retries, report, seconds)
     elif workers <= 1:
@@ -704,7 +735,7 @@ def run_chunks(
     if isinstance(out, dict):
         return out
     t0 = time.perf_counter()
-    arrays = finalize(out, grid, K)
+    arrays = finalize(out, grid, dirs)
     seconds["finish"] = seconds.get("finish", 0.0) + time.perf_counter() - t0
     return arrays
 
@@ -719,7 +750,7 @@ def _run_here(source, ranges, grid, dirs, batches, report, check, seconds) -> Ac
     done = 0
     for a, b in ranges:
         t0 = time.perf_counter()
-        chunk = source.read(a, b)
+        chunk = read_chunk(source, a, b)
         seconds["read"] = seconds.get("read", 0.0) + time.perf_counter() - t0
         single = len(ranges) == 1
         p = chunk_partial(
@@ -759,7 +790,7 @@ def _run_pool(source, ranges, grid, dirs, batches, workers, report, check, secon
                 f = pool.submit(_source_task, source, a, b, grid, dirs, batches)
             else:
                 t0 = time.perf_counter()
-                chunk = source.read(a, b)
+                chunk = read_chunk(source, a, b)
                 seconds["read"] = seconds.get("read", 0.0) + time.perf_counter() - t0
                 f = pool.submit(_chunk_task, chunk, grid, dirs, batches)
             pending[f] = b - a
@@ -810,7 +841,7 @@ def _run_dask(source, ranges, grid, dirs, batches, client, retries, report, seco
         if portable:
             f = client.submit(_source_task, source, a, b, grid, dirs, batches, retries=retries, pure=False)
         else:
-            f = client.submit(_chunk_task, source.read(a, b), grid, dirs, batches, retries=retries, pure=False)
+            f = client.submit(_chunk_task, read_chunk(source, a, b), grid, dirs, batches, retries=retries, pure=False)
         futures.append(f)
         sizes[f.key] = b - a
     level = list(futures)
@@ -819,7 +850,7 @@ def _run_dask(source, ranges, grid, dirs, batches, client, retries, report, seco
             client.submit(merge_partials, *level[i:i + FAN_IN], retries=retries, pure=False)
             for i in range(0, len(level), FAN_IN)
         ]  # fmt: skip
-    final = client.submit(finalize_partial, level[0], grid, len(dirs), retries=retries, pure=False)
+    final = client.submit(finalize_partial, level[0], grid, dirs, retries=retries, pure=False)
     # Hold no future but the last: a result the client still references stays
     # in a worker's memory after its merge has used it.
     del level

@@ -116,6 +116,15 @@ class AnisoTexture:
         entry_centroid: (E, 3) float64 area-weighted facet centroid, world units.
         entry_normal: (E, 3) float32 area-weighted mean facet normal (length <= 1).
         meta: provenance (direction set, seed, source, triangle count, mesh area).
+        entry_cover: (E,) float32 in [0.5, 1], the share of the entry's area
+            that is not hidden behind its own voxel's closed surface (the
+            back of a thin solid; :mod:`aniso3d.build.closure`): what splats
+            and the volume's sheets draw of it. 1 (default): all of it.
+        entry_closed_area, entry_closed_normal: (E,) and (E, 3) float64, the
+            area and vector area ``sum S n`` (h^2) of the entry's pieces on
+            closed surfaces, as built: what :func:`aniso3d.build.pyramid.coarsen`
+            needs to find what a coarser voxel's solids hide. Not stored in
+            files; None (a loaded texture): unknown.
     """
 
     origin: np.ndarray
@@ -133,10 +142,15 @@ class AnisoTexture:
     entry_centroid: np.ndarray
     entry_normal: np.ndarray
     meta: dict = field(default_factory=dict)
+    entry_cover: np.ndarray | None = None
+    entry_closed_area: np.ndarray | None = None
+    entry_closed_normal: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         m, k = len(self.coords), len(self.directions)
         e = len(self.entry_direction)
+        if self.entry_cover is None:
+            object.__setattr__(self, "entry_cover", np.ones(e, dtype=np.float32))
         checks = {
             "origin": (np.shape(self.origin), (3,)),
             "shape": (np.shape(self.shape), (3,)),
@@ -150,7 +164,13 @@ class AnisoTexture:
             "entry_shininess": (np.shape(self.entry_shininess), (e,)),
             "entry_centroid": (np.shape(self.entry_centroid), (e, 3)),
             "entry_normal": (np.shape(self.entry_normal), (e, 3)),
+            "entry_cover": (np.shape(self.entry_cover), (e,)),
         }
+        if (self.entry_closed_area is None) != (self.entry_closed_normal is None):
+            raise FormatError("texture fields 'entry_closed_area' and 'entry_closed_normal' come together")
+        if self.entry_closed_area is not None:
+            checks["entry_closed_area"] = (np.shape(self.entry_closed_area), (e,))
+            checks["entry_closed_normal"] = (np.shape(self.entry_closed_normal), (e, 3))
         for name, (got, want) in checks.items():
             if tuple(got) != want:
                 raise FormatError(f"texture field '{name}' has shape {got}, expected {want}")
@@ -344,7 +364,8 @@ def entry_points(
         vox = t.entry_voxel if voxels is None else np.repeat(voxels, off[voxels + 1] - off[voxels])
         centre = np.asarray(t.origin, np.float64) + (np.asarray(t.coords, np.float64)[vox] + 0.5) * h
         pos = centre if placement == "center" else centre + 0.5 * h * sample_n
-    area = t.entry_area[ent] * h * h
+    # What the entry covers: the back of a thin solid is not drawn twice.
+    area = t.entry_area[ent] * t.entry_cover[ent] * h * h
     kd, ks, sh = t.entry_kd[ent], t.entry_ks[ent], t.entry_shininess[ent]
     counts = _point_counts(t, ent, len(area), per_entry)
     if counts is None:
@@ -668,6 +689,13 @@ def build_texture(
     def on_progress(done: int, extra: float, stage: str) -> None:
         report(min(1.0, (done + extra) / n), stage)  # the share of the triangles done
 
+    # Faces on closed surfaces, so that a thin solid's back is not counted
+    # on top of its front (aniso3d.build.closure); skipped when reading
+    # every face at once would not fit the budget.
+    t0 = time.perf_counter()
+    found = source.find_closed(memory_budget)
+    stats["closed_faces"] = int(np.count_nonzero(source.closed)) if found else None
+    timings["closed"] = time.perf_counter() - t0
     seconds: dict = {}
     t0 = time.perf_counter()
     arrays = stream.run_chunks(
@@ -697,6 +725,9 @@ def build_texture(
         entry_shininess=arrays["entry_shininess"],
         entry_centroid=arrays["entry_centroid"],
         entry_normal=arrays["entry_normal"],
+        entry_cover=arrays["entry_cover"],
+        entry_closed_area=arrays["entry_closed_area"],
+        entry_closed_normal=arrays["entry_closed_normal"],
         meta={
             "direction_set": direction_set,
             "seed": int(seed),

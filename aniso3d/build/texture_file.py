@@ -9,12 +9,15 @@ fixed compression level).
 
 Versions:
 
-- **3** (written): the header names an *encoding*. ``"compact"`` (the
+- **4** (written): the header names an *encoding*. ``"compact"`` (the
   default) stores the members of :func:`aniso3d.build.encoding.encode`,
   quantised and predicted from neighbouring voxels, LZMA-compressed, and the
   numbers :func:`~aniso3d.build.encoding.decode` needs (``params``, inside
   the checksum); ``"exact"`` stores the texture's arrays as they are,
   deflated.
+- **3** (read only): as 4, without ``entry_cover`` (the share of each
+  entry's facets that is not hidden behind its own voxel's closed surface;
+  read as 1, every facet covering).
 - **2** (read only): as 3, but the compact members are version 2's
   (:data:`~aniso3d.build.encoding.MEMBERS_V2`: no copying from neighbours,
   centroids per axis) and deflated.
@@ -42,7 +45,17 @@ from typing import BinaryIO
 
 import numpy as np
 
-from aniso3d.build.encoding import ARRAYS, DEFAULT_BITS, MEMBERS, MEMBERS_V2, Bits, decode, encode
+from aniso3d.build.encoding import (
+    ARRAYS,
+    ARRAYS_V3,
+    DEFAULT_BITS,
+    MEMBERS,
+    MEMBERS_V2,
+    MEMBERS_V3,
+    Bits,
+    decode,
+    encode,
+)  # fmt: skip
 from aniso3d.build.mesh import check_readable_file
 from aniso3d.errors import FormatError, InputError
 from aniso3d.files import atomic_write
@@ -52,7 +65,7 @@ __all__ = ["ARRAYS", "ENCODINGS", "FORMAT_NAME", "FORMAT_VERSION", "TextureFile"
 
 FORMAT_NAME = "aniso3d-texture"
 #: The version written; every version from 1 up to it is read.
-FORMAT_VERSION = 3
+FORMAT_VERSION = 4
 #: The encodings of versions 2 and 3: quantised (default) or the arrays as they are.
 ENCODINGS = ("compact", "exact")
 REBUILD = "rebuild it from its mesh ('aniso3d build MESH -o out.a3d')"
@@ -86,7 +99,7 @@ def write_texture_file(
     bits: Bits = DEFAULT_BITS,
 ) -> Path:
     """Write ``arrays`` (every name of :data:`ARRAYS`) with the voxel size and
-    the JSON-representable part of ``meta``, atomically, as format version 3
+    the JSON-representable part of ``meta``, atomically, as format version 4
     in ``encoding`` ("compact", quantised with ``bits``, or "exact"), streamed
     into the file. The texture is encoded before the file is touched, so a
     texture that cannot be encoded leaves no file behind."""
@@ -176,7 +189,7 @@ def read_texture_file(path: str | os.PathLike) -> TextureFile:
                 )
             if not isinstance(params, dict):
                 raise FormatError(f"'{p}' has a damaged header: params is not an object; {REBUILD}")
-        names = ARRAYS if encoding == "exact" else _compact_members(params, version)
+        names = (ARRAYS if version >= 4 else ARRAYS_V3) if encoding == "exact" else _compact_members(params, version)
         members = {}
         for n in names:
             try:
@@ -203,17 +216,20 @@ def read_texture_file(path: str | os.PathLike) -> TextureFile:
         except FormatError as exc:
             raise FormatError(f"'{p}' is damaged: {exc}; {REBUILD}") from None
     else:
-        arrays = members
+        arrays = dict(members)
+        if "entry_cover" not in arrays:  # files before version 4: every facet covers
+            arrays["entry_cover"] = np.ones(len(arrays["entry_direction"]), dtype=np.float32)
     return TextureFile(arrays, float(voxel_size), meta, version, encoding)
 
 
 def _compact_members(params: dict, version: int) -> tuple[str, ...]:
     """The members a compact file of ``version`` must hold: all of
-    :data:`MEMBERS` (version 2: :data:`MEMBERS_V2`), but ``density`` only
+    :data:`MEMBERS` (version 3: :data:`MEMBERS_V3`, 2: :data:`MEMBERS_V2`), but ``density`` only
     when its residual is stored."""
     bits = params.get("bits")
     stored = not isinstance(bits, dict) or bits.get("density", 1) != 0
-    return tuple(n for n in (MEMBERS if version >= 3 else MEMBERS_V2) if n != "density" or stored)
+    names = MEMBERS if version >= 4 else MEMBERS_V3 if version >= 3 else MEMBERS_V2
+    return tuple(n for n in names if n != "density" or stored)
 
 
 def _member(name: str, deflate: bool = False, lzma: bool = False) -> zipfile.ZipInfo:

@@ -293,7 +293,7 @@ def density_along(
         return np.maximum(dens @ wt, 0.0)
     rows, owner = _entry_rows(texture, voxels)
     n = np.asarray(texture.entry_normal, dtype=np.float64)[rows]
-    area = np.asarray(texture.entry_area, dtype=np.float64)[rows]
+    area = covered_area(texture, rows)
     base_w = np.bincount(owner, area * np.abs(n @ w), minlength=len(voxels))
     nb = np.abs(n @ texture.directions[idx].T) * area[:, None]
     base_nb = np.stack(
@@ -314,7 +314,7 @@ def voxel_colors(
     voxels = np.arange(texture.n_voxels) if voxels is None else np.asarray(voxels, dtype=np.int64)
     rows, owner = _entry_rows(texture, voxels)
     c, n = _entry_colors(texture, w, lighting, normal, rows)
-    area = np.asarray(texture.entry_area, dtype=np.float64)[rows]
+    area = covered_area(texture, rows)
     return _weighted_colors(owner, len(voxels), c, area * np.abs(n @ w), area)
 
 
@@ -458,6 +458,13 @@ def _sections(normal: np.ndarray, local: np.ndarray) -> tuple[np.ndarray, np.nda
     return nh, d, np.where(ok, plane_section_area(nh, inner), 0.0)
 
 
+def covered_area(texture: AnisoTexture, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+    """Entry areas (h^2) as the volume draws them: each times its
+    ``entry_cover``, so that the back of a thin solid, which its front
+    hides inside the voxel, is not counted twice (aniso3d.build.closure)."""
+    return np.asarray(texture.entry_area, dtype=np.float64)[rows] * np.asarray(texture.entry_cover, np.float64)[rows]
+
+
 def entry_sheets(texture: AnisoTexture, voxels: np.ndarray | None = None) -> EntrySheets:
     """The sheets of ``texture``'s entries (see :class:`EntrySheets`), derived
     from what every texture stores (entry area, mean normal, centroid), so
@@ -471,6 +478,10 @@ def entry_sheets(texture: AnisoTexture, voxels: np.ndarray | None = None) -> Ent
         rows, owner = _entry_rows(texture, voxels)
         V = len(voxels)
     n = np.asarray(texture.entry_normal, dtype=np.float64)[rows]
+    # The facets' own area, not what they cover (covered_area): the cover is
+    # a mean over directions, which would thin a box's edges seen from where
+    # both faces show (the cube: FLIP 0.0061 -> 0.0074 close up); a thin
+    # solid's back is taken out of its density instead (aniso3d.build.closure).
     area = np.asarray(texture.entry_area, dtype=np.float64)[rows]
     h = float(texture.voxel_size)
     cell = np.asarray(texture.coords, dtype=np.float64)[texture.entry_voxel[rows]]
@@ -619,7 +630,7 @@ def sheet_terms(
     else:
         sh, at = sheets, rows
     c, n = _entry_colors(texture, w, lighting, normal, rows)
-    area = np.asarray(texture.entry_area, dtype=np.float64)[rows]
+    area = covered_area(texture, rows)
     pixels = np.broadcast_to(np.asarray(voxel_pixels, dtype=np.float64), (V,))[owner]
     share = sheet_share(sh.share[at], pixels)
     nh, a_s, fill = sh.normal[at], share * sh.area[at], share * sh.fill[at]
@@ -963,7 +974,7 @@ def pack_volume(texture: AnisoTexture) -> dict[str, np.ndarray]:
     sheets = entry_sheets(texture)
     entries = np.zeros((E, ENTRY_WORDS), dtype=np.uint32)
     entries[:, 0:3] = np.asarray(texture.entry_normal, dtype=np.float32).view(np.uint32)
-    entries[:, 3] = np.asarray(texture.entry_area, dtype=np.float32).view(np.uint32)
+    entries[:, 3] = covered_area(texture).astype(np.float32).view(np.uint32)
     half = np.zeros((E, 4), dtype=np.float16)
     half[:, 0:3] = np.clip(texture.entry_kd, 0.0, 6e4)
     half[:, 3] = np.clip(texture.entry_ks, 0.0, 6e4)
