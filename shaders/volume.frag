@@ -73,9 +73,24 @@ uniform ivec3 u_shape;
 uniform ivec3 u_bricks;
 uniform vec3 u_center_g;
 uniform int u_num_dirs;
+// The three modes are compiled in (render/volume.py: VolumeRenderer,
+// DENSITY_MODE, NORMAL_MODE, OPACITY_MODE: llvmpipe then drops the other
+// modes' code, 5% of a frame) or read as uniforms.
+#ifdef DENSITY_MODE
+#define u_density_mode DENSITY_MODE
+#else
 uniform int u_density_mode;
+#endif
+#ifdef NORMAL_MODE
+#define u_normal_mode NORMAL_MODE
+#else
 uniform int u_normal_mode;
+#endif
+#ifdef OPACITY_MODE
+#define u_opacity_mode OPACITY_MODE
+#else
 uniform int u_opacity_mode;
+#endif
 uniform float u_pixel_angle;
 uniform vec2 u_sheet_pixels;
 uniform float u_edge_filter;

@@ -1076,10 +1076,15 @@ class VolumeRenderer:
             "RUN_GAP": RUN_GAP,
         }
         self._defines = defines
-        self.prog = gl.program("volume.vert", "volume.frag", defines=defines)
-        self.vao = gl.track(ctx.vertex_array(self.prog, []))
-        #: Program and vertex array of the other marching modes, made when first drawn.
-        self._variants: dict[str, tuple[moderngl.Program, moderngl.VertexArray]] = {}
+        #: Compile the density, normal and opacity modes into the program (one
+        #: program per combination drawn, made when first drawn; llvmpipe then
+        #: drops the other modes' code: docs/volume_speed.md), else read them
+        #: as uniforms (one program for all: the bench's "uniform" case).
+        self.compile_modes = True
+        #: Program and vertex array of each marching mode (and modes, when
+        #: compiled in), made when first drawn.
+        self._variants: dict[tuple, tuple[moderngl.Program, moderngl.VertexArray | None]] = {}
+        self.prog, self.vao = self._program(MARCH_MODES[0], VolumeOptions())
         #: The last pyramid frame's level choice (see :func:`~aniso3d.rendering.select.volume_level`).
         self.last_lod_stats: dict | None = None
         #: Blend each frame "over" what the framebuffer holds, without depth
@@ -1163,7 +1168,7 @@ class VolumeRenderer:
             handle = handle.levels[level]
         elif opts.pixel_error is not None:
             raise InputError("pixel_error applies to a pyramid upload only (upload a Pyramid)")
-        prog, vao = self._program(opts.march)
+        prog, vao = self._program(opts.march, opts)
         cam = view.camera
         right, up, forward = cam.basis()
         t = float(np.tan(np.radians(cam.fov) / 2))
@@ -1181,15 +1186,12 @@ class VolumeRenderer:
                 "u_bricks": tuple(int(s) for s in handle.bricks),
                 "u_center_g": tuple(float(s) / 2 for s in handle.shape),
                 "u_num_dirs": int(handle.n_directions),
-                "u_density_mode": DENSITY_MODES.index(density),
-                "u_normal_mode": NORMAL_MODES.index(normal),
-                "u_opacity_mode": OPACITY_MODES.index(opacity),
-                "u_pixel_angle": 2.0 * t / float(view.size[1]),
-                "u_sheet_pixels": tuple(float(x) for x in SHEET_PIXELS),
-                "u_edge_filter": 1.0 if opts.edges == "filtered" else 0.0,
+                **self._mode_uniforms(opts),
                 "u_background": tuple(float(c) for c in view.lighting.background),
             },
         )
+        # The sheets' uniforms: compiled out with a law without sheets.
+        GLContext.set_uniforms(prog, self._sheet_uniforms(opts, view, t), strict=not self.compile_modes)
         GLContext.set_uniforms(prog, view.lighting.uniforms(), strict=False)
         if opts.march == "plain":
             for binding, buf in enumerate(self._storage_buffers(handle).values()):
@@ -1216,22 +1218,53 @@ class VolumeRenderer:
             return DrawStats(drawn=int(handle.n_voxels), unit="voxels")
         return DrawStats(drawn=int(handle.n_voxels), unit="voxels", levels=(int(stats["level"]),), lod=stats)
 
-    def _program(self, march: str) -> tuple[moderngl.Program, moderngl.VertexArray]:
-        """The program and vertex array of a marching mode (:data:`MARCH_MODES`)."""
-        if march == MARCH_MODES[0]:
-            return self.prog, self.vao
-        if march not in self._variants:
-            prog = self.gl.program("volume.vert", "volume.frag", defines={**self._defines, "PLAIN_MARCH": 1})
-            self._variants[march] = (prog, self.gl.track(self.gl.ctx.vertex_array(prog, [])))
-        return self._variants[march]
+    def _mode_defines(self, opts: VolumeOptions) -> dict[str, int]:
+        """The modes as volume.frag's defines when :attr:`compile_modes`, else none."""
+        if not self.compile_modes:
+            return {}
+        return {
+            "DENSITY_MODE": DENSITY_MODES.index(opts.density),
+            "NORMAL_MODE": NORMAL_MODES.index(opts.normal),
+            "OPACITY_MODE": OPACITY_MODES.index(opts.opacity),
+        }
 
-    def _instanced_program(self, march: str) -> moderngl.Program:
-        """The program of a marching mode with ``INSTANCED`` (volume.vert)."""
-        key = f"{march}/instanced"
+    def _mode_uniforms(self, opts: VolumeOptions) -> dict[str, int]:
+        """The modes as volume.frag's uniforms, unless compiled in."""
+        if self.compile_modes:
+            return {}
+        return {
+            "u_density_mode": DENSITY_MODES.index(opts.density),
+            "u_normal_mode": NORMAL_MODES.index(opts.normal),
+            "u_opacity_mode": OPACITY_MODES.index(opts.opacity),
+        }
+
+    @staticmethod
+    def _sheet_uniforms(opts: VolumeOptions, view: FrameView, tan_half: float) -> dict[str, object]:
+        """volume.frag's uniforms of the sheets ("split" and "planar" laws)."""
+        return {
+            "u_pixel_angle": 2.0 * tan_half / float(view.size[1]),
+            "u_sheet_pixels": tuple(float(x) for x in SHEET_PIXELS),
+            "u_edge_filter": 1.0 if opts.edges == "filtered" else 0.0,
+        }
+
+    def _program(
+        self, march: str, opts: VolumeOptions, instanced: bool = False
+    ) -> tuple[moderngl.Program, moderngl.VertexArray | None]:
+        """The program of a marching mode (:data:`MARCH_MODES`) and of the
+        modes of ``opts`` (when compiled in), with its vertex array (None
+        with ``INSTANCED``, whose draws make their own)."""
+        modes = self._mode_defines(opts)
+        key = (march, instanced, *sorted(modes.items()))
         if key not in self._variants:
-            defines = {**self._defines, "INSTANCED": 1, **({"PLAIN_MARCH": 1} if march == "plain" else {})}
-            self._variants[key] = (self.gl.program("volume.vert", "volume.frag", defines=defines), None)
-        return self._variants[key][0]
+            defines = {**self._defines, **modes}
+            if march == "plain":
+                defines["PLAIN_MARCH"] = 1
+            if instanced:
+                defines["INSTANCED"] = 1
+            prog = self.gl.program("volume.vert", "volume.frag", defines=defines)
+            vao = None if instanced else self.gl.track(self.gl.ctx.vertex_array(prog, []))
+            self._variants[key] = (prog, vao)
+        return self._variants[key]
 
     def draw_instanced(
         self, handle: GPUVolume, view: FrameView, instances: np.ndarray, options: VolumeOptions | None = None,
@@ -1250,7 +1283,7 @@ class VolumeRenderer:
         lighting (world), the size and the field of view.
         """
         opts = VolumeOptions.resolve(options, {})
-        prog = self._instanced_program(opts.march)
+        prog = self._program(opts.march, opts, instanced=True)[0]
         cam = view.camera
         right, up, forward = cam.basis()
         t = float(np.tan(np.radians(cam.fov) / 2))
@@ -1267,12 +1300,8 @@ class VolumeRenderer:
                 "u_bricks": tuple(int(s) for s in handle.bricks),
                 "u_center_g": tuple(float(s) / 2 for s in handle.shape),
                 "u_num_dirs": int(handle.n_directions),
-                "u_density_mode": DENSITY_MODES.index(opts.density),
-                "u_normal_mode": NORMAL_MODES.index(opts.normal),
-                "u_opacity_mode": OPACITY_MODES.index(opts.opacity),
-                "u_pixel_angle": 2.0 * t / float(view.size[1]),
-                "u_sheet_pixels": tuple(float(x) for x in SHEET_PIXELS),
-                "u_edge_filter": 1.0 if opts.edges == "filtered" else 0.0,
+                **self._mode_uniforms(opts),
+                **self._sheet_uniforms(opts, view, t),
                 "u_background": tuple(float(c) for c in view.lighting.background),
             },
             strict=False,
@@ -1328,7 +1357,7 @@ class VolumeRenderer:
 
     def release_all(self) -> None:
         """Free the renderer's own GPU objects (the programs stay cached in the context)."""
-        self.gl.free(self.vao, *(vao for _, vao in self._variants.values() if vao is not None))
+        self.gl.free(*(vao for _, vao in self._variants.values() if vao is not None))
         self.vao = None
         self._variants.clear()
 
