@@ -1154,7 +1154,6 @@ class VolumeRenderer:
         (framebuffer pixels, default 1).
         """
         opts = VolumeOptions.resolve(options, values)
-        density, normal, opacity = opts.density, opts.normal, opts.opacity
         stats: dict | None = None
         if isinstance(handle, GPULodVolume):
             stats = {}
