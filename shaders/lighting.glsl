@@ -72,40 +72,6 @@ vec3 shade(vec3 n, vec3 v, vec3 kd, float ks, float shininess, float coherence) 
     return color;
 }
 
-// shade()'s parts that do not depend on the view (the same arithmetic; keep
-// them in step with shade()), for a caller that keeps them per surface and
-// lighting (volume_shade.frag: the volume's shading table). shade_lobe():
-// the specular lobe's exponent s' and the energy kept at coherence c
-// (already clamped; 1 with the spread off). shade_diffuse(): ambient +
-// diffuse of the unit normal n, already turned towards the viewer.
-vec2 shade_lobe(float shininess, float c) {
-    float spread = 1.0 - c;
-    float s = shininess;
-    float energy = 1.0;
-    if (spread > 0.0) {
-        s = c * shininess / max(c + 4.0 * shininess * spread, 1e-30);
-        energy = (1.0 + s) / (1.0 + shininess);
-    }
-    return vec2(s, energy);
-}
-
-vec3 shade_diffuse(vec3 n, vec3 kd, float c) {
-    float spread = 1.0 - c;
-    vec3 color = u_ambient * kd;
-    for (int i = 0; i < MAX_LIGHTS; ++i) {
-        if (i >= u_num_lights) break;
-        float ndl = dot(n, LIGHT_DIR[i]);
-        float diffuse = max(ndl, 0.0);
-        if (spread > 0.0) {
-            float mu = c * ndl;
-            float a = sqrt(3.0 * spread * max(1.0 - ndl * ndl, 0.0));
-            diffuse = mu >= a ? mu : (mu <= -a ? 0.0 : (mu + a) * (mu + a) / (4.0 * a));
-        }
-        color += u_light_color[i] * (kd * diffuse);
-    }
-    return color;
-}
-
 // One plane (coherence 1): the plain closed form.
 vec3 shade(vec3 n, vec3 v, vec3 kd, float ks, float shininess) {
     return shade(n, v, kd, ks, shininess, 1.0);

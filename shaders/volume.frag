@@ -263,48 +263,6 @@ void neighbours(vec3 w) {
     if (u_density_mode == 2) g_nbw = vec4(1.0, 0.0, 0.0, 0.0);
 }
 
-#ifdef SHADE_TABLE
-#ifdef INSTANCED
-#error "the shading table holds the world's lights; instances turn them"
-#endif
-// shade() of entry e (shading normal ns, unit view vector v = -g_d),
-// clamped to [0, 1], from the shading table (volume_shade.frag): the
-// ambient and diffuse terms read, the specular lobe evaluated here with
-// Phong's r . v = 2 (n . l)(n . v) - l . v (l . v once per ray: g_lv).
-uniform usampler2D t_shade;
-vec4 g_lv;         // l_i . v of each light
-vec3 g_vdiff;      // sum of light colour x diffuse of the normal v (kd = 1)
-
-vec3 table_shade(uint e, vec3 ns, vec3 v) {
-    uvec4 q = texelFetch(t_shade, texel(e), 0);
-    vec2 lobe = unpackHalf2x16(q.w & 0x7fff7fffu);
-    vec2 p0 = unpackHalf2x16(q.x);
-    vec2 p1 = unpackHalf2x16(q.y);
-    vec2 p2 = unpackHalf2x16(q.z);
-    float len_s = length(ns);
-    // No shading normal: shade() turns it to the viewer (n = v); the table
-    // holds kd, the rest is the ray's.
-    bool flat_v = (q.w & 0x8000u) != 0u;
-    vec3 nu = len_s > 0.0 ? ns / len_s : v;
-    float nv = dot(nu, v);
-    bool back = nv < 0.0;
-    vec3 c = back ? vec3(p1.y, p2) : vec3(p0, p1.x);
-    c = flat_v ? c * (u_ambient + g_vdiff) : c;
-    float sgn = back ? -1.0 : 1.0;
-    nv *= sgn;
-    for (int i = 0; i < MAX_LIGHTS; ++i) {
-        if (i >= u_num_lights) break;
-        float ndl = sgn * dot(nu, LIGHT_DIR[i]);
-        if (ndl > 0.0) {
-            float rv = max(2.0 * ndl * nv - g_lv[i], 0.0);
-            // pow(0, 0) is undefined in GLSL; a zero exponent means a constant lobe.
-            c += u_light_color[i] * (lobe.y * (lobe.x > 0.0 ? pow(rv, lobe.x) : 1.0));
-        }
-    }
-    return clamp(c, 0.0, 1.0);
-}
-#endif
-
 // Add voxel v, crossed over ray parameters [t0, t0 + chord] (grid units)
 // from the voxel-local point x_in (the voxel is the unit cube).
 void composite(int v, vec3 x_in, float t0, float chord) {
@@ -354,11 +312,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
         vec3 ns = u_normal_mode == 0 ? n : DIR(b.w).xyz;
         float wgt = area * abs(dot(ns, g_d));
         // The mean normal's length is its facets' coherence (lighting.glsl).
-#ifdef SHADE_TABLE
-        vec3 c = table_shade(e, ns, view);
-#else
         vec3 c = clamp(shade(ns, view, vec3(kd_rg, kd_b_ks.x), kd_b_ks.y, shininess, length(n)), 0.0, 1.0);
-#endif
         col_w += wgt * c;
         sum_w += wgt;
         col_a += area * c;
@@ -591,10 +545,6 @@ void main() {
     if (!(t0 < t1)) discard;
 
     neighbours(g_d);
-#ifdef SHADE_TABLE
-    for (int i = 0; i < MAX_LIGHTS; ++i) g_lv[i] = -dot(LIGHT_DIR[i], g_d);
-    g_vdiff = shade_diffuse(-g_d, vec3(1.0), u_normal_spread != 0 ? 0.0 : 1.0) - u_ambient;
-#endif
     g_color = vec3(0.0);
     g_trans = 1.0;
     g_tau_s = 0.0;

@@ -134,14 +134,6 @@ STEPS = ("dda",)
 #: composites together; "plain" composites inside the DDA, as first written
 #: (kept for comparison, demos/bench_volume_speed.py). The same image.
 MARCH_MODES = ("skip", "plain")
-#: Where the "skip" marching shades an entry (``shading=``): "table" (default)
-#: reads what ``shade()`` computes without the view (ambient and diffuse terms
-#: of both sides, the specular lobe's exponent and scale) from a table drawn
-#: once per lighting and normal mode (``shaders/volume_shade.frag``), and
-#: evaluates only the specular lobe per pixel; "pixel" calls the whole
-#: ``shade()`` per pixel (as the "plain" marching and instanced draws always
-#: do). The same image but for the table's float16 rounding (under 1e-3).
-SHADING_MODES = ("table", "pixel")
 DENSITY_MODES = ("facet", "kernel", "nearest")
 NORMAL_MODES = ("mean", "sample")
 OPACITY_MODES = ("exponential", "linear", "split", "planar")
@@ -987,11 +979,6 @@ class GPUVolume:
     n_voxels: int
     sizes: dict[str, int]
     buffers: dict[str, moderngl.Buffer] = field(default_factory=dict)
-    n_entries: int = 0
-    #: The shading table (:data:`SHADING_MODES`), drawn for the lighting and
-    #: normal mode ``shade_key``; drawn again when they change.
-    shade_table: moderngl.Texture | None = None
-    shade_key: tuple | None = None
 
     @property
     def nbytes(self) -> int:
@@ -1034,8 +1021,6 @@ class VolumeOptions(DrawOptions):
             (the same image; "plain" is the slower first version).
         edges: how the "planar" law counts a sheet's crossing, one of
             :data:`EDGE_MODES`.
-        shading: where the "skip" marching shades an entry, one of
-            :data:`SHADING_MODES` (the same image to float16 rounding).
     """
 
     what: ClassVar[str] = "volume"
@@ -1047,13 +1032,11 @@ class VolumeOptions(DrawOptions):
     pixel_error: float | None = None
     march: str = "skip"
     edges: str = "filtered"
-    shading: str = "table"
 
     def __post_init__(self) -> None:
         _check_choice(self.step, STEPS, "volume step")
         _check_choice(self.edges, EDGE_MODES, "volume edges")
         _check_choice(self.march, MARCH_MODES, "volume marching")
-        _check_choice(self.shading, SHADING_MODES, "volume shading")
         _check_choice(self.density, DENSITY_MODES, "density reading")
         _check_choice(self.normal, NORMAL_MODES, "normal")
         _check_choice(self.opacity, OPACITY_MODES, "opacity law")
@@ -1101,7 +1084,7 @@ class VolumeRenderer:
         #: Program and vertex array of each marching mode (and modes, when
         #: compiled in), made when first drawn.
         self._variants: dict[tuple, tuple[moderngl.Program, moderngl.VertexArray | None]] = {}
-        self.prog, self.vao = self._program(MARCH_MODES[0], VolumeOptions(), table=True)
+        self.prog, self.vao = self._program(MARCH_MODES[0], VolumeOptions())
         #: The last pyramid frame's level choice (see :func:`~aniso3d.rendering.select.volume_level`).
         self.last_lod_stats: dict | None = None
         #: Blend each frame "over" what the framebuffer holds, without depth
@@ -1155,7 +1138,6 @@ class VolumeRenderer:
             n_directions=texture.n_directions,
             n_voxels=texture.n_voxels,
             sizes={name: int(arr.nbytes) for name, arr in arrays.items()},
-            n_entries=texture.n_entries,
         )
 
     def draw(
@@ -1185,10 +1167,7 @@ class VolumeRenderer:
             handle = handle.levels[level]
         elif opts.pixel_error is not None:
             raise InputError("pixel_error applies to a pyramid upload only (upload a Pyramid)")
-        table = opts.march == "skip" and opts.shading == "table"
-        prog, vao = self._program(opts.march, opts, table=table)
-        if table:
-            self._shade_table(handle, view.lighting, NORMAL_MODES.index(opts.normal))
+        prog, vao = self._program(opts.march, opts)
         cam = view.camera
         right, up, forward = cam.basis()
         t = float(np.tan(np.radians(cam.fov) / 2))
@@ -1221,10 +1200,6 @@ class VolumeRenderer:
             GLContext.set_uniforms(prog, samplers, strict=False)
             for unit, tex in enumerate(handle.textures.values()):
                 tex.use(location=unit)
-            if table:
-                unit = len(handle.textures)
-                GLContext.set_uniforms(prog, {"t_shade": unit})
-                handle.shade_table.use(location=unit)
         ctx = self.gl.ctx
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
@@ -1272,22 +1247,19 @@ class VolumeRenderer:
         }
 
     def _program(
-        self, march: str, opts: VolumeOptions, instanced: bool = False, table: bool = False
+        self, march: str, opts: VolumeOptions, instanced: bool = False
     ) -> tuple[moderngl.Program, moderngl.VertexArray | None]:
         """The program of a marching mode (:data:`MARCH_MODES`) and of the
-        modes of ``opts`` (when compiled in), with the shading table or
-        without, with its vertex array (None with ``INSTANCED``, whose draws
-        make their own)."""
+        modes of ``opts`` (when compiled in), with its vertex array (None
+        with ``INSTANCED``, whose draws make their own)."""
         modes = self._mode_defines(opts)
-        key = (march, instanced, table, *sorted(modes.items()))
+        key = (march, instanced, *sorted(modes.items()))
         if key not in self._variants:
             defines = {**self._defines, **modes}
             if march == "plain":
                 defines["PLAIN_MARCH"] = 1
             if instanced:
                 defines["INSTANCED"] = 1
-            if table:
-                defines["SHADE_TABLE"] = 1
             prog = self.gl.program("volume.vert", "volume.frag", defines=defines)
             vao = None if instanced else self.gl.track(self.gl.ctx.vertex_array(prog, []))
             self._variants[key] = (prog, vao)
@@ -1373,49 +1345,12 @@ class VolumeRenderer:
                 raise ResourceError(f"uploading the volume failed (out of GPU memory?): {exc}") from None
         return handle.buffers
 
-    def _shade_table(self, handle: GPUVolume, lighting: Lighting, normal_mode: int) -> None:
-        """Draw ``handle``'s shading table (volume_shade.frag) unless it holds
-        this lighting and normal mode already; the bound framebuffer stays bound."""
-        light = lighting.uniforms()
-        key = (normal_mode, repr(sorted(light.items())))
-        if handle.shade_table is not None and handle.shade_key == key:
-            return
-        ctx = self.gl.ctx
-        n = max(handle.n_entries, 1)
-        width = min(n, TEX_WIDTH)
-        size = (width, -(-n // width))
-        if handle.shade_table is None:
-            try:
-                handle.shade_table = self.gl.track(ctx.texture(size, 4, dtype="u4"))
-            except moderngl.Error as exc:
-                raise ResourceError(f"the volume's shading table failed (out of GPU memory?): {exc}") from None
-            handle.shade_table.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        prog = self.gl.program("volume.vert", "volume_shade.frag", defines=self._defines)
-        GLContext.set_uniforms(prog, {"u_num_entries": int(handle.n_entries), "u_normal_mode": normal_mode})
-        GLContext.set_uniforms(prog, light, strict=False)
-        GLContext.set_uniforms(prog, {"t_ent": 0, "t_dirs": 1}, strict=False)
-        handle.textures["entries"].use(location=0)
-        handle.textures["directions"].use(location=1)
-        bound = ctx.fbo
-        fbo = ctx.framebuffer(color_attachments=[handle.shade_table])
-        vao = ctx.vertex_array(prog, [])
-        try:
-            fbo.use()
-            ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
-            vao.render(moderngl.TRIANGLES, vertices=3)
-        finally:
-            vao.release()
-            fbo.release()
-            bound.use()
-        handle.shade_key = key
-
     def release(self, handle: GPUVolume | GPULodVolume) -> None:
         if isinstance(handle, GPULodVolume):
             for level in handle.levels:
                 self.release(level)
             return
-        self.gl.free(*handle.textures.values(), *handle.buffers.values(), handle.shade_table)
-        handle.shade_table, handle.shade_key = None, None
+        self.gl.free(*handle.textures.values(), *handle.buffers.values())
         handle.textures.clear()
         handle.buffers.clear()
 
