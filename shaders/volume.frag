@@ -158,6 +158,9 @@ float density_at(int v, int p) {
 }
 #endif
 
+#ifdef START_PASS
+uniform sampler2D t_start;
+#endif
 out vec4 f_color;
 
 // Per-ray state shared by the helpers below.
@@ -543,6 +546,15 @@ void main() {
         }
     }
     if (!(t0 < t1)) discard;
+#ifdef START_PASS
+    // The start pass (volume_start.vert): where the ray first enters a
+    // widened occupied brick, if it enters one; before that it meets no
+    // occupied voxel.
+    float s_start = texelFetch(t_start, ivec2(gl_FragCoord.xy), 0).r;
+    if (!(s_start < 0.5 * BIG)) discard;
+    t0 = max(t0, s_start / cos_f);
+    if (!(t0 < t1)) discard;
+#endif
 
     neighbours(g_d);
     g_color = vec3(0.0);
