@@ -1,19 +1,20 @@
 """Frame time of the volume renderer against 1-spp polygons: the first
-marching ("plain"), the "skip" marching with its modes read as uniforms
-("uniform", before) and compiled in ("skip", the default), per scene and
-bench distance; and their accuracy at the corpus cameras.
+marching ("plain"), the "skip" marching as it was ("before": its modes read
+as uniforms, rays from the grid's box) and as it is ("skip": the modes
+compiled in, the start pass where it pays), per scene and bench distance;
+and the accuracy of both at the corpus cameras.
 
 The default tree at --size (1024) and every corpus scene at --corpus-size
 (256: a 1024^2 sweep of nine scenes does not fit the time we have), each at
 the bench's cameras (aniso3d.bench.cameras.make_cameras with the "full"
 preset's footprints, the default texture: 128^3, K = 16). Per camera the
-four cases are timed interleaved (polygons, plain, uniform, skip, polygons, ...)
+four cases are timed interleaved (polygons, plain, before, skip, polygons, ...)
 over --frames frames: median and spread (min-max) of Renderer.last_frame_seconds
 (draw + read back), and the load average before and after. Accuracy: PSNR
 of each volume case against 8x8 polygons (aniso3d.metrics.compare_in_box in
 the bench's crop box); and, per corpus scene at the corpus cameras
 (aniso3d.bench.corpus.corpus_cameras at 512^2, resolution 128), PSNR and FLIP
-of "uniform" and "skip" against 8x8 polygons. Writes Markdown tables.
+of "before" and "skip" against 8x8 polygons. Writes Markdown tables.
 
     .venv/bin/python demos/bench_volume_speed.py [--out docs/volume_speed.md]
         [--size 1024] [--corpus-size 256] [--frames 5] [--scenes tree,bush]
@@ -39,19 +40,19 @@ from aniso3d.files import atomic_write
 from aniso3d.metrics import compare_in_box
 from aniso3d.rendering.renderer import Renderer
 
-#: The volume cases: marching, and whether the modes are compiled in
-#: (VolumeRenderer.compile_modes).
-VOLUME_CASES = {"plain": ("plain", True), "uniform": ("skip", False), "skip": ("skip", True)}
+#: The volume cases: marching, whether the modes are compiled in
+#: (VolumeRenderer.compile_modes), and where rays start (VolumeOptions.start).
+VOLUME_CASES = {"plain": ("plain", False, "box"), "before": ("skip", False, "box"), "skip": ("skip", True, "bricks")}
 
 
 def render_case(r: Renderer, thing, cam, case: str):
     """One frame of a case: "mesh" or one of :data:`VOLUME_CASES`."""
     if case == "mesh":
         return r.render(thing, cam, "mesh")
-    march, compiled = VOLUME_CASES[case]
+    march, compiled, start = VOLUME_CASES[case]
     r.method_renderer("volume").compile_modes = compiled
     try:
-        return r.render(thing, cam, "volume", march=march)
+        return r.render(thing, cam, "volume", march=march, start=start)
     finally:
         r.method_renderer("volume").compile_modes = True
 
@@ -93,7 +94,7 @@ def bench_scene(name: str, size: int, frames: int) -> list[dict]:
 
 
 def accuracy_scene(name: str) -> list[str]:
-    """Rows of PSNR / FLIP against 8x8 polygons of "uniform" and "skip" at the
+    """Rows of PSNR / FLIP against 8x8 polygons of "before" and "skip" at the
     corpus cameras of scene ``name`` (512^2, resolution 128)."""
     mesh = aniso3d.scenes.get_scene(name)
     tex = aniso3d.build_texture(mesh)
@@ -103,8 +104,8 @@ def accuracy_scene(name: str) -> list[str]:
         for spec in corpus_cameras(mesh, size, 128):
             truth = r.render(mesh, spec.camera, "mesh", ssaa=8)
             got = {m: compare_in_box(truth, render_case(r, tex, spec.camera, m), spec.crop, with_flip=True)
-                   for m in ("uniform", "skip")}  # fmt: skip
-            u, k = got["uniform"], got["skip"]
+                   for m in ("before", "skip")}  # fmt: skip
+            u, k = got["before"], got["skip"]
             lines.append(
                 f"| {name} | {spec.label} | {u['psnr']:.3f} | {k['psnr']:.3f} | {k['psnr'] - u['psnr']:+.3f} "
                 f"| {u['flip']:.4f} | {k['flip']:.4f} |"
@@ -118,18 +119,18 @@ def _ms(v: tuple[float, float, float]) -> str:
 
 
 def _line(row: dict) -> str:
-    m, p, u, s = row["mesh"], row["plain"], row["uniform"], row["skip"]
+    m, p, u, s = row["mesh"], row["plain"], row["before"], row["skip"]
     ps = row["psnr"]
     return (
         f"| {row['scene']} | {row['size']} | {row['camera']} | {_ms(m)} | {_ms(p)} | {p[0] / m[0]:.1f} "
         f"| {_ms(u)} | {u[0] / m[0]:.1f} | {_ms(s)} | {s[0] / m[0]:.1f} | {s[0] / u[0]:.2f} "
-        f"| {ps['plain']:.2f} | {ps['uniform']:.2f} | {ps['skip']:.2f} | {ps['skip'] - ps['uniform']:+.3f} |"
+        f"| {ps['plain']:.2f} | {ps['before']:.2f} | {ps['skip']:.2f} | {ps['skip'] - ps['before']:+.3f} |"
     )
 
 
 HEADER = (
-    "| scene | px | camera | polygons 1-spp ms | plain ms | plain / poly | uniform ms | uniform / poly "
-    "| skip ms | skip / poly | skip / uniform | PSNR plain | PSNR uniform | PSNR skip | dPSNR |"
+    "| scene | px | camera | polygons 1-spp ms | plain ms | plain / poly | before ms | before / poly "
+    "| skip ms | skip / poly | skip / before | PSNR plain | PSNR before | PSNR skip | dPSNR |"
 )
 
 
@@ -167,9 +168,10 @@ def main() -> None:
         "",
         'Default texture (128^3, K = 16), default options (opacity "planar"). Per camera of the bench '
         '(`fill`, then a baseline voxel of 2 ... 0.25 px), polygons, "plain" (the first marching: '
-        'storage buffers, compositing inside the two-level DDA, T_MIN 0.001), "uniform" (the '
-        '"skip" marching with the density, normal and opacity modes read as uniforms: the default '
-        'before) and "skip" (now the default: the modes compiled in) are timed interleaved: '
+        'storage buffers, compositing inside the two-level DDA, T_MIN 0.001), "before" (the '
+        '"skip" marching as it was: the density, normal and opacity modes read as uniforms, rays '
+        'from the grid\'s box) and "skip" (now the default: the modes compiled in, rays from the '
+        "first occupied brick where a voxel spans 4 px or more) are timed interleaved: "
         "median (min-max) of draw + read back, ms. PSNR against 8x8 polygons in the bench's crop box "
         f"(`compare_in_box`). The tree at {args.size}^2, the other corpus scenes at {args.corpus_size}^2.",
         "",
@@ -186,7 +188,7 @@ def main() -> None:
             '`Renderer.render(mesh, cam, "mesh", ssaa=8)` in the crop box (`compare_in_box`, FLIP '
             "lower is better).",
             "",
-            "| scene | camera | PSNR uniform | PSNR skip | dPSNR | FLIP uniform | FLIP skip |",
+            "| scene | camera | PSNR before | PSNR skip | dPSNR | FLIP before | FLIP skip |",
             "|---|---|---|---|---|---|---|",
             *acc,
         ]

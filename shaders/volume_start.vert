@@ -7,8 +7,8 @@
 // In: per instance in_brick, the brick cell (x, y, z); u_forward, u_right,
 // u_up, u_tan, u_base_c, u_base_s, u_center_g, u_shape as in volume.frag.
 // Out: v_s, the distance along u_forward beyond the ray base (voxel units);
-// clip z = 0, so only the eye plane clips (the host draws the pass only when
-// every box lies beyond the near plane).
+// clip z = 0, so only the eye's plane clips (the host draws the pass only
+// when every box lies in front of it: render/volume.py start_pass_pays).
 in vec3 in_brick;
 uniform vec3 u_forward;
 uniform vec3 u_right;

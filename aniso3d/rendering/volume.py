@@ -140,7 +140,7 @@ MARCH_MODES = ("skip", "plain")
 #: a pixel whose ray enters none being left as cleared; "box" at the grid's
 #: box. The same image but for float rounding. "bricks" draws the pass only
 #: where it pays, a voxel at the grid's front spanning :data:`START_PIXELS`
-#: or more (docs/volume_speed.md), and never where a box reaches the near
+#: or more (docs/volume_speed.md), and never where a box reaches the eye's
 #: plane, with instances or with :attr:`VolumeRenderer.blend_over`.
 START_MODES = ("bricks", "box")
 #: The start pass is drawn when a voxel at the grid's front spans at least
@@ -1000,6 +1000,8 @@ class GPUVolume:
     #: The occupied brick cells (x, y, z) as float32 triples (the start pass's instances).
     brick_cells: moderngl.Buffer | None = None
     n_bricks: int = 0
+    #: ... and on the CPU, (n_bricks, 3) int64.
+    brick_grid: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int64))
 
     @property
     def nbytes(self) -> int:
@@ -1160,9 +1162,9 @@ class VolumeRenderer:
         occupied = np.flatnonzero(arrays["top"] >= 0)
         cells = np.stack(
             [occupied % bricks[0], occupied // bricks[0] % bricks[1], occupied // (bricks[0] * bricks[1])], axis=1
-        ).astype(np.float32)
+        )
         try:
-            brick_cells = self.gl.track(self.gl.ctx.buffer(cells.tobytes())) if len(cells) else None
+            brick_cells = self.gl.track(self.gl.ctx.buffer(cells.astype(np.float32).tobytes())) if len(cells) else None
         except moderngl.Error as exc:
             self.gl.free(*textures.values())
             raise ResourceError(f"uploading the volume failed (out of GPU memory?): {exc}") from None
@@ -1179,6 +1181,7 @@ class VolumeRenderer:
             sizes={name: int(arr.nbytes) for name, arr in arrays.items()},
             brick_cells=brick_cells,
             n_bricks=len(cells),
+            brick_grid=cells,
         )
 
     def draw(
@@ -1492,22 +1495,29 @@ def _array_texture(ctx: moderngl.Context, arr: np.ndarray, dtype: str, comps: in
 
 
 def start_pass_pays(handle: GPUVolume, eye, forward, near: float, pixel_angle: float) -> bool:
-    """Whether :meth:`VolumeRenderer.draw` draws the start pass (float64): the
-    grid's box, widened by :data:`START_MARGIN` voxels and a voxel more, lies
-    wholly beyond the near plane (then every widened brick box does, and a
-    ray enters the first it meets through a front face, the only faces the
-    pass draws), and a voxel at its front depth spans at least
-    :data:`START_PIXELS` pixels (``pixel_angle``: radians a pixel spans)."""
+    """Whether :meth:`VolumeRenderer.draw` draws the start pass (float64,
+    vectorised over the occupied bricks): every occupied brick's box, widened
+    by :data:`START_MARGIN` voxels and a voxel more, lies half a voxel or
+    more in front of the eye (so a ray enters the first it meets through a
+    front face, the only faces the pass draws, and the pass, which clips only
+    at the eye's plane, draws the whole face; a box across the near plane
+    then gives an entry before it, and the ray starts at the near plane as
+    before), and a voxel at the front-most box's depth spans at least
+    :data:`START_PIXELS` pixels (``pixel_angle``: radians a pixel spans).
+    ``near`` is the near plane's distance (world units), only for the check
+    that it lies in front of the eye."""
     if handle.n_bricks == 0:
         return False
     h = handle.voxel_size
     pad = (START_MARGIN + 1.0) * h
-    lo = np.asarray(handle.grid_origin, dtype=np.float64) - pad
-    hi = lo + np.asarray(handle.shape, dtype=np.float64) * h + 2 * pad
+    shape = np.asarray(handle.shape, dtype=np.float64)
+    lo = handle.brick_grid * float(BRICK)
+    hi = np.minimum(lo + BRICK, shape)
     f = np.asarray(forward, dtype=np.float64)
-    # The box's nearest point along forward: per axis the end facing the eye.
-    front = float((np.where(f > 0, lo, hi) - np.asarray(eye, dtype=np.float64)) @ f)
-    return front > float(near) and h >= START_PIXELS * front * pixel_angle
+    # Each box's nearest corner along forward: per axis the end facing the eye.
+    corner = np.asarray(handle.grid_origin, dtype=np.float64) + np.where(f > 0, lo, hi) * h - np.sign(f) * pad
+    front = float(np.min((corner - np.asarray(eye, dtype=np.float64)) @ f))
+    return float(near) > 0.0 and front > 0.5 * h and h >= START_PIXELS * front * pixel_angle
 
 
 def ray_base(
