@@ -57,17 +57,21 @@ def render_case(r: Renderer, thing, cam, case: str):
         r.method_renderer("volume").compile_modes = True
 
 
-def time_interleaved(r: Renderer, cases: dict, cam, frames: int) -> dict[str, list[float]]:
+def time_interleaved(r: Renderer, cases: dict, cam, frames: int) -> tuple[dict, dict]:
     """Seconds per frame of each case (name -> thing), one frame of each in
-    turn, after one warm-up frame each."""
+    turn, after one warm-up frame each: wall (draw + read back) and process
+    CPU time (every llvmpipe thread; steadier on a shared machine)."""
     for name, thing in cases.items():
         render_case(r, thing, cam, name)
     times: dict[str, list[float]] = {name: [] for name in cases}
+    cpu: dict[str, list[float]] = {name: [] for name in cases}
     for _ in range(frames):
         for name, thing in cases.items():
+            c0 = time.process_time()
             render_case(r, thing, cam, name)
+            cpu[name].append(time.process_time() - c0)
             times[name].append(r.last_frame_seconds)
-    return times
+    return times, cpu
 
 
 def bench_scene(name: str, size: int, frames: int) -> list[dict]:
@@ -79,13 +83,14 @@ def bench_scene(name: str, size: int, frames: int) -> list[dict]:
         for spec in make_cameras(mesh.bounds, settings):
             cam = spec.camera
             cases = {"mesh": mesh, **{m: tex for m in VOLUME_CASES}}
-            t = time_interleaved(r, cases, cam, frames)
+            t, cpu = time_interleaved(r, cases, cam, frames)
             truth = r.render(mesh, cam, "mesh", ssaa=8)
             psnr = {
                 m: compare_in_box(truth, render_case(r, tex, cam, m), spec.crop, with_flip=False)["psnr"]
                 for m in VOLUME_CASES
             }
             row = {"scene": name, "size": size, "camera": spec.label, "psnr": psnr}
+            row["cpu"] = {m: 1000 * float(np.median(v)) for m, v in cpu.items()}
             for m, v in t.items():
                 row[m] = (1000 * float(np.median(v)), 1000 * float(np.min(v)), 1000 * float(np.max(v)))
             rows.append(row)
@@ -124,13 +129,15 @@ def _line(row: dict) -> str:
     return (
         f"| {row['scene']} | {row['size']} | {row['camera']} | {_ms(m)} | {_ms(p)} | {p[0] / m[0]:.1f} "
         f"| {_ms(u)} | {u[0] / m[0]:.1f} | {_ms(s)} | {s[0] / m[0]:.1f} | {s[0] / u[0]:.2f} "
+        f"| {row['cpu']['before']:.0f} | {row['cpu']['skip']:.0f} | {row['cpu']['skip'] / row['cpu']['before']:.3f} "
         f"| {ps['plain']:.2f} | {ps['before']:.2f} | {ps['skip']:.2f} | {ps['skip'] - ps['before']:+.3f} |"
     )
 
 
 HEADER = (
     "| scene | px | camera | polygons 1-spp ms | plain ms | plain / poly | before ms | before / poly "
-    "| skip ms | skip / poly | skip / before | PSNR plain | PSNR before | PSNR skip | dPSNR |"
+    "| skip ms | skip / poly | skip / before | CPU before ms | CPU skip ms | CPU skip / before "
+    "| PSNR plain | PSNR before | PSNR skip | dPSNR |"
 )
 
 
@@ -172,11 +179,13 @@ def main() -> None:
         '"skip" marching as it was: the density, normal and opacity modes read as uniforms, rays '
         'from the grid\'s box) and "skip" (now the default: the modes compiled in, rays from the '
         "first occupied brick where a voxel spans 4 px or more) are timed interleaved: "
-        "median (min-max) of draw + read back, ms. PSNR against 8x8 polygons in the bench's crop box "
+        "median (min-max) of draw + read back, ms, and the median process CPU time (ms, every "
+        "llvmpipe thread: steadier than wall time on a shared machine). PSNR against 8x8 polygons "
+        "in the bench's crop box "
         f"(`compare_in_box`). The tree at {args.size}^2, the other corpus scenes at {args.corpus_size}^2.",
         "",
         HEADER,
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
         *[_line(row) for row in rows],
     ]
     if acc:

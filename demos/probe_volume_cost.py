@@ -1,6 +1,6 @@
 """Where the volume's frame goes: process CPU time of the default volume
-frame against variants of volume.frag / lighting.glsl that leave out one
-part (the images differ; only the time is read), timed interleaved.
+frame against variants of volume.frag / lighting.glsl that leave out or
+change one part (the images differ; only the time is read), interleaved.
 
 The variants are text patches applied to the shader sources as they are
 loaded (aniso3d.rendering.shader_source.preprocess's loader), so each one is
@@ -12,7 +12,14 @@ the committed shader minus that part:
 - ``no_entries``: composite() skips the loop over the voxel's entries;
 - ``first_hit``: a ray stops at its first occupied voxel (set-up, misses
   and the walk to the first hit);
-- ``set_up``: every ray stops after its set-up (box clip, neighbours()).
+- ``set_up``: every ray stops after its set-up (box clip, neighbours());
+- ``lazy_neighbours``: neighbours() called at a ray's first composite, not
+  before its walk (rays that hit nothing skip it);
+- ``t_min_0.01``, ``t_min_0.02``: rays stop at a higher transmittance (the
+  image changes by up to that much).
+
+Frames are drawn with start="box" (rays from the grid's box, one program at
+every camera).
 
 CPU time (time.process_time: this process, every llvmpipe thread) is steadier
 than wall time on a shared machine. Prints a Markdown table: median
@@ -39,8 +46,8 @@ from aniso3d.rendering.renderer import Renderer
 from aniso3d.rendering.shader_source import preprocess, read_shader
 from aniso3d.rendering.volume import VolumeOptions
 
-#: name -> {shader file: [(text, replacement), ...]}
-PATCHES: dict[str, dict[str, list[tuple[str, str]]]] = {
+#: name -> {shader file: [(text, replacement), ...], "defines": {name: value}}
+PATCHES: dict[str, dict] = {
     "default": {},
     "no_shading": {
         "volume.frag": [
@@ -77,10 +84,23 @@ PATCHES: dict[str, dict[str, list[tuple[str, str]]]] = {
             )
         ]
     },
+    "lazy_neighbours": {
+        "volume.frag": [
+            ("    neighbours(g_d);\n    g_color = vec3(0.0);", "    bool nb_ready = false;\n    g_color = vec3(0.0);"),
+            (
+                "        if (v >= 0) composite(v, o + g_d * tv - vec3(vcell), tv, chord);",
+                "        if (v >= 0) {\n            if (!nb_ready) {\n                neighbours(g_d);\n"
+                "                nb_ready = true;\n            }\n"
+                "            composite(v, o + g_d * tv - vec3(vcell), tv, chord);\n        }",
+            ),
+        ]
+    },
+    "t_min_0.01": {"defines": {"T_MIN": 0.01}},
+    "t_min_0.02": {"defines": {"T_MIN": 0.02}},
 }
 
 
-def patched_loader(patches: dict[str, list[tuple[str, str]]]):
+def patched_loader(patches: dict):
     def load(name: str) -> str:
         src = read_shader(name)
         for old, new in patches.get(name, []):
@@ -106,12 +126,16 @@ def main() -> None:
     print(f"{args.scene} at {args.size}^2, load before {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}")
     with Renderer((args.size, args.size)) as r:
         impl = r.method_renderer("volume")
-        key = next(iter(impl._variants))  # the default program, made first
-        defines = {**impl._defines, **impl._mode_defines(VolumeOptions())}
+        # The default program without the start pass (the frames below draw
+        # start="box", so that every camera draws this program).
+        made = impl._program("skip", VolumeOptions())
+        key = next(k for k, v in impl._variants.items() if v is made)
+        base = {**impl._defines, **impl._mode_defines(VolumeOptions())}
         ctx = impl.gl.ctx
         progs = {}
         for name, patches in PATCHES.items():
             load = patched_loader(patches)
+            defines = {**base, **patches.get("defines", {})}
             prog = ctx.program(
                 vertex_shader=preprocess("volume.vert", defines, load),
                 fragment_shader=preprocess("volume.frag", defines, load),
@@ -128,12 +152,12 @@ def main() -> None:
             cpu: dict[str, list[float]] = {name: [] for name in progs}
             for name in progs:  # warm-up
                 impl._variants[key] = progs[name]
-                r.render(tex, spec.camera, "volume")
+                r.render(tex, spec.camera, "volume", start="box")
             for _ in range(args.frames):
                 for name in progs:
                     impl._variants[key] = progs[name]
                     c0 = time.process_time()
-                    r.render(tex, spec.camera, "volume")
+                    r.render(tex, spec.camera, "volume", start="box")
                     cpu[name].append(1000 * (time.process_time() - c0))
             base = float(np.median(cpu["default"]))
             cells = [f"{np.median(v):.0f} ({min(v):.0f}-{max(v):.0f}), {np.median(v) / base:.2f}" for v in cpu.values()]
