@@ -73,9 +73,24 @@ uniform ivec3 u_shape;
 uniform ivec3 u_bricks;
 uniform vec3 u_center_g;
 uniform int u_num_dirs;
+// The three modes are compiled in (render/volume.py: VolumeRenderer,
+// DENSITY_MODE, NORMAL_MODE, OPACITY_MODE: llvmpipe then drops the other
+// modes' code, 5% of a frame) or read as uniforms.
+#ifdef DENSITY_MODE
+#define u_density_mode DENSITY_MODE
+#else
 uniform int u_density_mode;
+#endif
+#ifdef NORMAL_MODE
+#define u_normal_mode NORMAL_MODE
+#else
 uniform int u_normal_mode;
+#endif
+#ifdef OPACITY_MODE
+#define u_opacity_mode OPACITY_MODE
+#else
 uniform int u_opacity_mode;
+#endif
 uniform float u_pixel_angle;
 uniform vec2 u_sheet_pixels;
 uniform float u_edge_filter;
@@ -143,6 +158,9 @@ float density_at(int v, int p) {
 }
 #endif
 
+#ifdef START_PASS
+uniform sampler2D t_start;
+#endif
 out vec4 f_color;
 
 // Per-ray state shared by the helpers below.
@@ -531,6 +549,15 @@ void main() {
         }
     }
     if (!(t0 < t1)) discard;
+#ifdef START_PASS
+    // The start pass (volume_start.vert): where the ray first enters a
+    // widened occupied brick, if it enters one; before that it meets no
+    // occupied voxel.
+    float s_start = texelFetch(t_start, ivec2(gl_FragCoord.xy), 0).r;
+    if (!(s_start < 0.5 * BIG)) discard;
+    t0 = max(t0, s_start / cos_f);
+    if (!(t0 < t1)) discard;
+#endif
 
     neighbours(g_d);
     g_color = vec3(0.0);

@@ -100,3 +100,79 @@ def test_skip_draws_the_plain_image(r, scenes, name, opacity, tmp_path):
             save_png(tmp_path / f"{name}_{k}.png", np.concatenate([plain, skip], axis=1)[..., :3])
         assert diff <= 2, (name, k, diff, str(tmp_path))
         assert (skip[..., 3] > 0).any()
+
+
+#: Image size at which the close cameras put START_PIXELS or more in a voxel.
+CLOSE_SIZE = (192, 192)
+
+
+def _close_cameras(tex) -> list[Camera]:
+    """Cameras at which a voxel spans START_PIXELS or more at CLOSE_SIZE (the
+    start pass is drawn), from an oblique direction and along an axis."""
+    return [
+        Camera.frame(tex.bounds, direction=(0.7, 0.2, 0.6), distance_scale=0.7),
+        Camera.frame(tex.bounds, direction=(0.0, 0.0, 1.0), distance_scale=0.7),
+    ]
+
+
+@pytest.mark.gpu
+@pytest.mark.parametrize("name", ["sphere", "lattice", "tree"])
+def test_start_pass_draws_the_box_image(r, scenes, name, tmp_path):
+    """Rays started at the first occupied brick (start="bricks") draw the
+    image of rays started at the grid's box, to 1/255: they walk the same
+    voxels from there (the DDA restarted later rounds its crossings a little
+    differently); a pixel whose ray enters no brick stays as cleared."""
+    tex = scenes[name]
+    impl = r.method_renderer("volume")
+    for k, cam in enumerate(_close_cameras(tex)):
+        box = r.render(tex, cam, "volume", size=CLOSE_SIZE, alpha=True, start="box")
+        assert not impl.last_start_pass
+        bricks = r.render(tex, cam, "volume", size=CLOSE_SIZE, alpha=True, start="bricks")
+        assert impl.last_start_pass, (name, k)
+        diff = np.abs(box.astype(int) - bricks.astype(int)).max()
+        if diff > 1:
+            save_png(tmp_path / f"{name}_{k}.png", np.concatenate([box, bricks], axis=1)[..., :3])
+        assert diff <= 1, (name, k, diff, str(tmp_path))
+        assert (bricks[..., 3] > 0).any() and (bricks[..., 3] == 0).any()
+
+
+@pytest.mark.gpu
+def test_start_pass_only_where_it_pays(r, scenes):
+    """No start pass where a voxel spans under START_PIXELS (a far camera) or
+    where the grid reaches the near plane (the eye inside it)."""
+    tex = scenes["tree"]
+    impl = r.method_renderer("volume")
+    far = Camera.frame(tex.bounds, distance_scale=3.0)
+    lo, hi = tex.bounds
+    inside = Camera(position=tuple(0.5 * (lo + hi)), target=tuple(hi), fov=60.0)
+    for cam in (far, inside):
+        img = r.render(tex, cam, "volume", size=SIZE, alpha=True)
+        assert not impl.last_start_pass
+        assert np.isfinite(img).all()
+
+
+@pytest.mark.gpu
+@pytest.mark.parametrize(
+    "opts",
+    [
+        {},
+        {"opacity": "exponential"},
+        {"opacity": "linear", "density": "kernel"},
+        {"opacity": "split", "density": "nearest", "normal": "sample"},
+        {"edges": "sampled"},
+    ],
+)
+def test_compiled_modes_draw_the_uniform_image(r, scenes, opts):
+    """The density, normal and opacity modes compiled into the program draw
+    what the same modes read as uniforms do (the same arithmetic)."""
+    tex = scenes["tree"]
+    impl = r.method_renderer("volume")
+    cam = Camera.frame(tex.bounds, direction=(0.7, 0.2, 0.6))
+    try:
+        impl.compile_modes = False
+        uniform = r.render(tex, cam, "volume", size=SIZE, alpha=True, **opts)
+    finally:
+        impl.compile_modes = True
+    compiled = r.render(tex, cam, "volume", size=SIZE, alpha=True, **opts)
+    assert np.abs(uniform.astype(int) - compiled.astype(int)).max() <= 1
+    assert (compiled[..., 3] > 0).any()
