@@ -50,8 +50,12 @@ from aniso3d.rendering.splat.options import SplatOptions
 from aniso3d.rendering.splat.params import AA_DTYPE, AA_LAYERS, AA_SLICES, ACCUM_DTYPE
 from aniso3d.rendering.splat.pipeline import SplatPipeline, Targets
 
-#: Image unit the occupancy mask of quality "high" is bound to.
+#: Image unit the occupancy mask of quality "high" is bound to (visibility and
+#: surfaces passes), and the surfaces texture (accumulation pass). Both stay 0,
+#: the image uniforms' default: setting an image uniform to another unit through
+#: moderngl did not take on llvmpipe (the loads read zeros).
 MASK_UNIT = 0
+SURFACES_UNIT = 0
 
 
 def visible_then_accumulate(
@@ -172,8 +176,8 @@ class HighPass:
         ctx.enable(moderngl.BLEND)
         ctx.blend_equation = moderngl.FUNC_ADD
         ctx.blend_func = moderngl.ONE, moderngl.ONE
-        tg.surfaces.use(location=0)
-        pipe.splats(handle, view, opts, "accumulate", {**uniforms, "u_surfaces": 0})
+        tg.surfaces.bind_to_image(SURFACES_UNIT, read=True, write=False)
+        pipe.splats(handle, view, opts, "accumulate", {**uniforms, "u_surfaces": SURFACES_UNIT})
         ctx.disable(moderngl.BLEND)
         ctx.enable(moderngl.DEPTH_TEST)
         textures = {"u_visible": tg.depth, "u_surfaces": tg.surfaces}
