@@ -8,6 +8,10 @@
 // homography rows hu, hv, hw, hc), gl_FragCoord. Uniforms: u_viewport,
 // u_srange and u_depth (below); for PASS 2 also u_ray (columns f, R, U: the
 // eye ray of NDC (x, y) is f + x R + y U), u_visible and lighting.glsl's.
+// With AA the sprites read no uniform (splat.vert passes what they need per
+// splat, the rows over pixel offsets from SplatData.org), only the images
+// u_mask and u_surfaces; the geometry path's per-pixel shading reads u_ray,
+// u_viewport, u_shade_box and lighting.glsl's.
 // Defines: ROUND (0: square |u|, |v| <= 1; 1: disc/ellipse u^2 + v^2 <= 1,
 // the ellipse being a disc in stretched axes); PASS:
 //   0 (geometry)   out: the point's id (f_id, unsigned), exact gl_FragDepth;

@@ -49,7 +49,11 @@
 // u_regime.x and .y pixels), linear depths (t - near) / (far - near) of the
 // centre (centre_z, centre_zp) and of its bounding sphere (zrange), the box
 // drawn (clip) and, in PASS 2, its colour shaded once at the centre (for
-// sub-pixel splats and the layers behind the first).
+// sub-pixel splats and the layers behind the first). With AA the rows hu, hv,
+// hw, hc are over (1, p - org), p the pixel coordinates (gl_FragCoord) and
+// org a pixel of the box, instead of (1, x, y) in NDC, and the uniforms the
+// fragment stage needs come per splat (srange, lmap, pushz): see the end of
+// main().
 
 uniform vec3 u_q0;           // e + t0 f, local frame (see above)
 uniform float u_t0;          // view depth of the local origin
