@@ -24,13 +24,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from bench_splat_speed import load_torus  # noqa: E402
+
 import aniso3d  # noqa: E402
 from aniso3d.bench.corpus import view_direction  # noqa: E402
 from aniso3d.build import scenes  # noqa: E402
 from aniso3d.rendering.camera import Camera  # noqa: E402
 from aniso3d.rendering.renderer import Renderer  # noqa: E402
 from aniso3d.rendering.splat import coverage, fast, pipeline  # noqa: E402
-from bench_splat_speed import load_torus  # noqa: E402
 
 
 class PassClock:
@@ -101,7 +102,7 @@ def main() -> None:
             load1 = os.getloadavg()[0]
             print(f"\n{name} ({len(cloud):,} points, {args.size}^2), load {load0:.1f}-{load1:.1f}; "
                   f"ms, median [min-max] of {args.frames}")  # fmt: skip
-            print(f"| pass | wall | CPU |\n|---|---|---|")
+            print("| pass | wall | CPU |\n|---|---|---|")
             rows = list(clock.times.items()) + [(f"{q}: frame (render + read-back)", v) for q, v in frame.items()]
             for label, vals in rows:
                 w, c = (np.array(x) * 1e3 for x in zip(*vals, strict=True))
