@@ -22,10 +22,14 @@ cached in ``--cache`` (they do not depend on the splat code).
 
 Tables go to stdout and, with ``--md``, between ``<!-- NAME:begin -->`` and
 ``<!-- NAME:end -->`` of that file, NAME from ``--marker``; ``--json`` also
-writes the numbers.
+writes the numbers. ``--compare BEFORE.json`` (the ``--json`` of an earlier
+run, e.g. on the parent commit) adds tables of both runs side by side: the
+high / fast ratios, and per scene and camera the PSNR and FLIP before and
+after and their change.
 
     .venv/bin/python demos/bench_splat_speed.py [--frames 5] [--accuracy] \\
-        [--md docs/splat_speed.md --marker after] [--json /tmp/after.json]
+        [--md docs/splat_speed.md --marker after] [--json /tmp/after.json] \\
+        [--compare /tmp/before.json]
 """
 
 from __future__ import annotations
@@ -148,6 +152,35 @@ def accuracy(args, cache: Path) -> list[dict]:
     return rows
 
 
+def compare_tables(before: dict, speed_rows: list[dict], acc_rows: list[dict]) -> list[str]:
+    """Markdown lines: this run against ``before`` (another run's ``--json``)."""
+    lines = [f"Before: {before['head']}", ""]
+    old = {r["cloud"]: r for r in before["speed"]}
+    both = [(old[r["cloud"]], r) for r in speed_rows if r["cloud"] in old]
+    if both:
+        lines += ["| cloud | high ms before | high ms after | high / fast before | after | (CPU) before | after |",
+                  "|---|---|---|---|---|---|---|"]  # fmt: skip
+        for b, a in both:
+            cpu = [x["high"]["cpu"] / x["fast"]["cpu"] for x in (b, a)]
+            lines.append(f"| {a['cloud']} | {b['high']['median']:.0f} | {a['high']['median']:.0f} "
+                         f"| {b['ratio']:.2f} | {a['ratio']:.2f} | {cpu[0]:.2f} | {cpu[1]:.2f} |")  # fmt: skip
+        lines.append("")
+    old_acc = {(r["scene"], r["camera"]): r for r in before["accuracy"]}
+    pairs = [(old_acc[(r["scene"], r["camera"])], r) for r in acc_rows if (r["scene"], r["camera"]) in old_acc]
+    if pairs:
+        lines += ["| scene | camera | voxel px | PSNR before | PSNR after | change dB | FLIP before | FLIP after "
+                  "| change |", "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+        for b, a in pairs:
+            lines.append(f"| {a['scene']} | {a['camera']} | {a['voxel_px']:.2f} | {b['psnr']:.2f} | {a['psnr']:.2f} "
+                         f"| {a['psnr'] - b['psnr']:+.3f} | {b['flip']:.4f} | {a['flip']:.4f} "
+                         f"| {a['flip'] - b['flip']:+.4f} |")  # fmt: skip
+        dp = [a["psnr"] - b["psnr"] for b, a in pairs]
+        df = [a["flip"] - b["flip"] for b, a in pairs]
+        lines += ["", f"Largest PSNR loss {-min(dp):.3f} dB, largest gain {max(dp):.3f} dB; "
+                  f"largest FLIP increase {max(df):+.4f}.", ""]  # fmt: skip
+    return lines
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--size", type=int, default=1024)
@@ -162,6 +195,7 @@ def main() -> None:
     ap.add_argument("--md", default="", help="Markdown file to write the tables into")
     ap.add_argument("--marker", default="bench_splat_speed")
     ap.add_argument("--json", default="", help="file to write the numbers to")
+    ap.add_argument("--compare", default="", help="an earlier run's --json, to set side by side")
     args = ap.parse_args()
     cache = Path(args.cache)
     cache.mkdir(parents=True, exist_ok=True)
@@ -195,13 +229,14 @@ def main() -> None:
     if speed_rows:
         lines += [f"Frame time at {args.size}x{args.size}, ms: median (fastest-slowest) of {args.frames} frames "
                   f"after a warm-up, fast and high alternating; CPU: median process CPU time.", "",
-                  "| cloud | points | fast ms | high ms | fast CPU | high CPU | high / fast | load |",
-                  "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+                  "| cloud | points | fast ms | high ms | fast CPU | high CPU | high / fast | high / fast (CPU) "
+                  "| load |", "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
         for row in speed_rows:
             f, h = row["fast"], row["high"]
             lines.append(f"| {row['cloud']} | {row['points']:,} | {f['median']:.0f} ({f['min']:.0f}-{f['max']:.0f}) "
                          f"| {h['median']:.0f} ({h['min']:.0f}-{h['max']:.0f}) | {f['cpu']:.0f} | {h['cpu']:.0f} "
-                         f"| {row['ratio']:.2f} | {row['load'][0]:.1f}-{row['load'][1]:.1f} |")  # fmt: skip
+                         f"| {row['ratio']:.2f} | {h['cpu'] / f['cpu']:.2f} "
+                         f"| {row['load'][0]:.1f}-{row['load'][1]:.1f} |")  # fmt: skip
         lines.append("")
     if acc_rows:
         lines += [f"Accuracy of splats high (discs) at {args.accuracy_size}x{args.accuracy_size} against "
@@ -211,6 +246,8 @@ def main() -> None:
             lines.append(f"| {row['scene']} | {row['camera']} | {row['voxel_px']:.2f} | {row['psnr']:.2f} "
                          f"| {row['flip']:.4f} |")  # fmt: skip
         lines.append("")
+    if args.compare:
+        lines += compare_tables(json.loads(Path(args.compare).read_text()), speed_rows, acc_rows)
     block = "\n".join(lines)
     print(block)
     if args.json:

@@ -8,6 +8,10 @@
 // homography rows hu, hv, hw, hc), gl_FragCoord. Uniforms: u_viewport,
 // u_srange and u_depth (below); for PASS 2 also u_ray (columns f, R, U: the
 // eye ray of NDC (x, y) is f + x R + y U), u_visible and lighting.glsl's.
+// With AA the sprites read no uniform (splat.vert passes what they need per
+// splat, the rows over pixel offsets from SplatData.org), only the images
+// u_mask and u_surfaces; the geometry path's per-pixel shading reads u_ray,
+// u_viewport, u_shade_box and lighting.glsl's.
 // Defines: ROUND (0: square |u|, |v| <= 1; 1: disc/ellipse u^2 + v^2 <= 1,
 // the ellipse being a disc in stretched axes); PASS:
 //   0 (geometry)   out: the point's id (f_id, unsigned), exact gl_FragDepth;
@@ -96,7 +100,10 @@ uniform mat3 u_ray;
 #if PASS == 2
 uniform mat3 u_ray;
 #ifdef AA
-uniform usampler2D u_surfaces;  // splat_surfaces.frag: where the pixel's surfaces start
+// splat_surfaces.frag's output, where the pixel's surfaces start, read as an
+// image: llvmpipe's image load costs about half its texel fetch, which ran
+// for every fragment of the pass (0.2 s of a 1M-point frame at 1024^2).
+layout(rgba32ui) readonly uniform uimage2D u_surfaces;
 #ifdef GEOMETRY_PATH
 uniform float u_shade_box;    // splats of wider boxes are shaded per pixel
 #endif
@@ -130,8 +137,9 @@ float coverage(vec3 h, bool hit) {
     float large = 0.0;
     if (fs_in.regime > 0.0 && hit) {
         vec2 uv = h.xy / h.z;
-        vec2 k = 2.0 / (u_viewport * h.z);
-        // Gradients of u and v per pixel (the homography's derivatives).
+        float k = 1.0 / h.z;
+        // Gradients of u and v per pixel (the homography's derivatives; its
+        // rows are over pixels here, see main()).
         vec2 gu = (fs_in.hu.yz - uv.x * fs_in.hw.yz) * k;
         vec2 gv = (fs_in.hv.yz - uv.y * fs_in.hw.yz) * k;
 #if ROUND
@@ -151,7 +159,7 @@ float coverage(vec3 h, bool hit) {
 
 // The slice coordinate of a linear depth.
 float slice_of(float z) {
-    return (z - u_slices.x) * u_slices.y;
+    return (z - fs_in.lmap.z) * fs_in.lmap.w;
 }
 #endif
 #if defined(AA) && PASS == 1
@@ -169,7 +177,7 @@ void mark(float u) {
 // before its slice (splat_surfaces.frag packs the starts in 16 bits each).
 int layer_of(float u) {
     uint s = uint(clamp(int(floor(u)), 0, SLICES - 1));
-    uvec4 r = texelFetch(u_surfaces, ivec2(gl_FragCoord.xy), 0);
+    uvec4 r = imageLoad(u_surfaces, ivec2(gl_FragCoord.xy));
     // Plain comparisons, no local array: llvmpipe puts an indexed local
     // array in memory, which cost more than the texel fetch.
     int k = 0;
@@ -196,18 +204,24 @@ int layer_of(float u) {
 #endif
 
 void main() {
+#ifdef AA
+    // Rows over pixel offsets from fs_in.org (splat.vert), so that no uniform
+    // is read here (on llvmpipe a uniform costs a gather per load).
+    vec3 xy1 = vec3(1.0, gl_FragCoord.xy - fs_in.org);
+#else
     vec3 xy1 = vec3(1.0, gl_FragCoord.xy / u_viewport * 2.0 - 1.0);
+#endif
     vec3 h = vec3(dot(fs_in.hu, xy1), dot(fs_in.hv, xy1), dot(fs_in.hw, xy1));
     float sw = -dot(fs_in.hc, xy1);  // (t - t0) w'
 #ifdef AA
     // Only the box the filtered splat reaches (a point sprite is a square
     // around it; the geometry path's quad is the box itself).
     if (any(lessThan(gl_FragCoord.xy, fs_in.clip.xy)) || any(greaterThan(gl_FragCoord.xy, fs_in.clip.zw))) discard;
-    bool hit = h.z > 0.0 && sw >= u_srange.x * h.z && sw <= u_srange.y * h.z;
+    bool hit = h.z > 0.0 && sw >= fs_in.srange.x * h.z && sw <= fs_in.srange.y * h.z;
     // Linear depth (t - near) / (far - near), uniformly precise over the clip
     // range, where a layer may be far thinner than a step of window depth:
     // t - near = delta + (t - t0), the plane's where the ray meets it.
-    float lin = hit ? (u_depth.y + sw / h.z) / u_range : fs_in.centre_z;
+    float lin = hit ? fs_in.lmap.x + fs_in.lmap.y * (sw / h.z) : fs_in.centre_z;
     float c = coverage(h, hit);
     if (!(c >= MIN_COVERAGE)) discard;
     float z = clamp(lin, fs_in.zrange.x, fs_in.zrange.y);
@@ -215,14 +229,14 @@ void main() {
 #if PASS == 1
     mark(u);
     // Below 1, so the surfaces pass (an early depth test) visits every marked pixel.
-    gl_FragDepth = clamp(z + fs_in.push / u_range, 0.0, 0.99999);
+    gl_FragDepth = clamp(z + fs_in.pushz, 0.0, 0.99999);
 #elif PASS == 2
     int layer = layer_of(u);
     vec3 rgb = fs_in.rgb;
 #ifdef GEOMETRY_PATH
     vec2 extent = fs_in.clip.zw - fs_in.clip.xy;
     if (layer == 0 && max(extent.x, extent.y) + 0.02 > u_shade_box && hit) {
-        vec3 d = u_ray * xy1;
+        vec3 d = u_ray * vec3(1.0, gl_FragCoord.xy / u_viewport * 2.0 - 1.0);
         rgb = clamp(shade(fs_in.n, -normalize(d), fs_in.kd, fs_in.spec.x, fs_in.spec.y, length(fs_in.n)), 0.0, 1.0);
     }
 #endif

@@ -221,6 +221,40 @@ def test_separate_draws_composite_in_either_order(r):
     assert np.abs(a - b).max() < 1e-5
 
 
+@pytest.mark.gpu
+def test_a_just_cleared_target_composites_in_one_pass(r):
+    # Renderer.render tells the splats their target was just cleared
+    # (cleared=True), and "high" then skips the two passes that put a cloud
+    # under nearer pixels: the same image as all three passes (nothing is
+    # nearer in a cleared target) for the scene of the test above drawn as
+    # one cloud; and the passes are really skipped: the field drawn after
+    # the square with cleared=True (wrongly) loses its part under the rim.
+    cam, focal = head_on()
+    px = 3.0 / focal
+    rng = np.random.default_rng(2)
+    n = 4000
+    pos = np.c_[rng.uniform(-40 * px, 40 * px, (n, 2)), np.full(n, -0.5)]
+    field = cloud(pos, np.tile([0.0, 0.0, 1.0], (n, 1)), np.full(n, (0.4 * px) ** 2),
+                  kd=(0.1, 0.6, 0.2))  # fmt: skip
+    front = cloud(
+        [(5.3 * px, -3.7 * px, 0.4)], [(0.3, 0.2, 0.93)], [(30 * px) ** 2], kd=(0.8, 0.3, 0.2)
+    )
+    both = PointCloud(np.r_[field.positions, front.positions], np.r_[field.normals, front.normals],
+                      np.r_[field.areas, front.areas], np.r_[field.kd, front.kd], 0.0, 8.0)  # fmt: skip
+    three = draw_float(r, both, cam, quality="high")
+    one = draw_float(r, both, cam, quality="high", cleared=True)
+    assert three[..., 3].max() > 0.5
+    assert np.array_equal(one, three)
+    eight = r.render(both, cam, "splat", quality="high", size=SIZE).astype(float)  # cleared=True
+    assert np.abs(eight - 255 * three[..., :3]).max() <= 1.0  # blending in 8 bits: one grey level
+    bounds = np.stack([np.minimum(field.bounds[0], front.bounds[0]),
+                       np.maximum(field.bounds[1], front.bounds[1])])  # fmt: skip
+    under = draw_float(r, [front, field], cam, bounds, quality="high")
+    skipped = draw_float(r, [front, field], cam, bounds, quality="high", cleared=True)
+    rim = (under[..., 3] > 0.05) & (under[..., 3] < 0.95)
+    assert np.abs(skipped - under)[rim].max() > 0.05
+
+
 # ------------------------------------------------------------ accuracy
 
 

@@ -462,7 +462,9 @@ class Renderer:
             near, far = scene_clip_range(handle, camera)
         else:
             handle = self.upload(thing, method, build=b)
-            draw = lambda: impl.draw(handle, view, fbo=fbo, options=opts)  # noqa: E731
+            # The splats may skip compositing under earlier draws: fbo is cleared just below.
+            fresh = {"cleared": True} if method == "splat" else {}
+            draw = lambda: impl.draw(handle, view, fbo=fbo, options=opts, **fresh)  # noqa: E731
             near, far = camera.clip_range(handle.bounds)
         view = FrameView(camera, self.lighting, (fw, fh), near, far, ssaa)
         fbo = self._fbo((fw, fh))

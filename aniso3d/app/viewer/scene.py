@@ -238,7 +238,8 @@ class SceneView:
                 if isinstance(handle, SceneUpload):  # the renderer's scene path
                     frame.stats = draw_scene(shown.impl, handle, view, fbo, options)
                 else:
-                    frame.stats = shown.impl.draw(handle, view, fbo=fbo, options=options)
+                    fresh = {"cleared": True} if shown.impl.method == "splat" else {}  # fbo cleared above
+                    frame.stats = shown.impl.draw(handle, view, fbo=fbo, options=options, **fresh)
                 self.gl.ctx.finish()  # time the whole frame, not just queueing its commands
                 ms = 1000.0 * (time.perf_counter() - t0)
                 self.frame_ms = ms if self.frame_ms is None else 0.7 * self.frame_ms + 0.3 * ms

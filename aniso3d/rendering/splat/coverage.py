@@ -50,8 +50,12 @@ from aniso3d.rendering.splat.options import SplatOptions
 from aniso3d.rendering.splat.params import AA_DTYPE, AA_LAYERS, AA_SLICES, ACCUM_DTYPE
 from aniso3d.rendering.splat.pipeline import SplatPipeline, Targets
 
-#: Image unit the occupancy mask of quality "high" is bound to.
+#: Image unit the occupancy mask of quality "high" is bound to (visibility and
+#: surfaces passes), and the surfaces texture (accumulation pass). Both stay 0,
+#: the image uniforms' default: setting an image uniform to another unit through
+#: moderngl did not take on llvmpipe (the loads read zeros).
 MASK_UNIT = 0
+SURFACES_UNIT = 0
 
 
 def visible_then_accumulate(
@@ -99,9 +103,10 @@ class BlendPass:
 
     def draw(
         self, handle: GPUPoints, view: FrameView, opts: SplatOptions, uniforms: dict, tg: Targets,
-        target, viewport,
+        target, viewport, cleared: bool = False,
     ) -> None:  # fmt: skip
-        """The three passes, the last into ``target`` with ``viewport``."""
+        """The three passes, the last into ``target`` with ``viewport``
+        (``cleared`` changes nothing here)."""
         pipe = self.pipe
         visible_then_accumulate(pipe, handle, view, opts, uniforms, tg, tg.accumulate)
         textures = {"u_accum": tg.accum, "u_visible": tg.depth}
@@ -141,9 +146,10 @@ class HighPass:
 
     def draw(
         self, handle: GPUPoints, view: FrameView, opts: SplatOptions, uniforms: dict, tg: Targets,
-        target, viewport,
+        target, viewport, cleared: bool = False,
     ) -> None:  # fmt: skip
-        """The four passes, the last composited onto ``target`` with ``viewport``."""
+        """The four passes, the last composited onto ``target`` with ``viewport``
+        (``cleared``: see :meth:`composite`)."""
         pipe = self.pipe
         ctx = pipe.gl.ctx
         # Visibility: the pushed nearest depth, and the occupancy mask.
@@ -172,8 +178,8 @@ class HighPass:
         ctx.enable(moderngl.BLEND)
         ctx.blend_equation = moderngl.FUNC_ADD
         ctx.blend_func = moderngl.ONE, moderngl.ONE
-        tg.surfaces.use(location=0)
-        pipe.splats(handle, view, opts, "accumulate", {**uniforms, "u_surfaces": 0})
+        tg.surfaces.bind_to_image(SURFACES_UNIT, read=True, write=False)
+        pipe.splats(handle, view, opts, "accumulate", {**uniforms, "u_surfaces": SURFACES_UNIT})
         ctx.disable(moderngl.BLEND)
         ctx.enable(moderngl.DEPTH_TEST)
         textures = {"u_visible": tg.depth, "u_surfaces": tg.surfaces}
@@ -182,16 +188,19 @@ class HighPass:
         prog, vao = pipe.resolve("splat_aa_resolve.frag", textures, uniforms, target, viewport, aa=True)
         units = [uniforms.pop(f"u_layer[{i}]") for i in range(len(tg.layers))]
         uniforms["u_layer"] = units if len(units) > 1 else units[0]
-        self.composite(prog, vao, uniforms, target)
+        self.composite(prog, vao, uniforms, target, cleared)
 
-    def composite(self, prog, vao, uniforms: dict, target) -> None:
+    def composite(self, prog, vao, uniforms: dict, target, cleared: bool = False) -> None:
         """The layers composited onto ``target`` (bound), which may hold
         earlier draws: over them where this cloud's visible layer is nearer
         (or nothing is there), and under them where it is farther, so that
         separately drawn clouds combine like one (up to rounding) in either
         order. The target's colour already holds its background, so "under"
         adds (1 - alpha) (this colour - background): the positive part, then
-        the negative part by reverse subtraction."""
+        the negative part by reverse subtraction. ``cleared``: the caller
+        has just cleared ``target`` (depth 1 everywhere), so nothing can lie
+        in front of the cloud and the two "under" passes, each as costly as
+        the first (their depth test runs after the shader), are skipped."""
         ctx = self.pipe.gl.ctx
         bind = self.pipe.bind
         ctx.enable(moderngl.BLEND)
@@ -199,6 +208,8 @@ class HighPass:
         ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
         bind(prog, {**uniforms, "u_mode": 0})
         vao.render(moderngl.TRIANGLES, vertices=3)
+        if cleared:
+            return
         ctx.depth_func = ">"
         target.depth_mask = False
         ctx.blend_func = (moderngl.ONE_MINUS_DST_ALPHA, moderngl.ONE, moderngl.ZERO, moderngl.ONE)

@@ -42,9 +42,10 @@ class FastPass:
 
     def draw(
         self, handle: GPUPoints, view: FrameView, opts: SplatOptions, uniforms: dict, tg: Targets,
-        target, viewport,
+        target, viewport, cleared: bool = False,
     ) -> None:  # fmt: skip
-        """Both passes, the second into ``target`` with ``viewport``."""
+        """Both passes, the second into ``target`` with ``viewport``
+        (``cleared`` changes nothing here)."""
         pipe = self.pipe
         tg.visibility.use()  # depth only: the id target needs no clearing
         tg.visibility.clear(depth=1.0)

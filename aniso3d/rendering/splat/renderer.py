@@ -98,13 +98,15 @@ class SplatRenderer:
 
     def draw(
         self, handle: GPUPoints, view: FrameView, fbo=None, options: SplatOptions | None = None,
-        **values,
+        *, cleared: bool = False, **values,
     ) -> DrawStats:  # fmt: skip
         """Draw into ``fbo`` (bound, cleared to the background with alpha 0,
         viewport covering it); writes colour, alpha 1 where a splat landed
         (coverage) and depth. With ``quality="high"`` alpha is the covered
         fraction, and the cloud is composited with what ``fbo`` holds
-        (over it where nearer, under it where farther).
+        (over it where nearer, under it where farther); ``cleared=True``
+        says ``fbo`` holds nothing drawn yet (depth 1 everywhere), which
+        spares "high" the passes that put the cloud under nearer pixels.
 
         Options: ``options`` (:class:`SplatOptions`) or the same as keywords.
         A pyramid upload (:class:`GPULodPoints`) first selects this frame's
@@ -131,7 +133,7 @@ class SplatRenderer:
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
         ctx.depth_func = "<"
         try:
-            quality.draw(handle, view, opts, uniforms, tg, target, viewport)
+            quality.draw(handle, view, opts, uniforms, tg, target, viewport, cleared)
         finally:
             target.depth_mask = True
             target.scissor = None
