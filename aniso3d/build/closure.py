@@ -20,7 +20,7 @@ several faces, which the flat cut does not see: H takes out what the faces
 hide of each other there. Counting those cuts as axis-aligned instead
 (``sum_i |V_i| |w_i|`` for ``|V . w|``, which keeps a corner whole) measured
 worse on every scene it changed (the lattice minified: volume -0.8 dB,
-splats -1.7 dB; the cube's splats -1.4 dB; docs/coverage.md, "Thin
+splats -1.7 dB; the cube's splats -1.4 to -2.0 dB; docs/coverage.md, "Thin
 solids"). Open facets (leaves, blades, an open sheet's border) are not
 touched: two leaves in a voxel each cover.
 

@@ -171,8 +171,8 @@ SHEET_QUANTISED = 0.02
 #: lengths are stored finely near 1 (where :data:`SHEET_BEND` is steep). Runs
 #: of surface sheets (:data:`RUN_SHARE`) close the gaps between neighbouring
 #: planes by the footprint's shares, and widening them by 0.005 (chosen before
-#: runs) cost the blob 0.5 dB and the sphere 0.5 at the corpus cameras
-#: (docs/encoding.md): none.
+#: runs) lost the blob and the sphere more than it kept from the file's
+#: rounding: none.
 SHEET_QUANTISED_V3 = 0.0
 #: Extra crossing tolerance per unit spread of an entry's normals (see
 #: :class:`EntrySheets`).
@@ -228,7 +228,7 @@ RUN_STEEP = 0.5
 #: :func:`run_coverage`). There ``n . w`` is near 0 and its sign, the side,
 #: falls either way as a file rounds the normal; a sheet seen at 88 degrees
 #: off its normal is still crossed whole. Chosen on the corpus, the cube and
-#: the sphere (blob +0.8 dB close up, +1.1 minified; 0.06 cost the cube 3 dB).
+#: the sphere (0.06 took in the cube's faces seen at 86 degrees).
 RUN_GRAZE = 0.03
 #: uint32 words per shading entry on the GPU (three uvec4; see volume.frag).
 ENTRY_WORDS = 12
@@ -498,7 +498,7 @@ def entry_sheets(texture: AnisoTexture, voxels: np.ndarray | None = None) -> Ent
     n = np.asarray(texture.entry_normal, dtype=np.float64)[rows]
     # The facets' own area, not what they cover (covered_area): the cover is
     # a mean over directions, which would thin a box's edges seen from where
-    # both faces show (the cube: FLIP 0.0061 -> 0.0074 close up); a thin
+    # both faces show (the cube's FLIP rose close up); a thin
     # solid's back is taken out of its density instead (aniso3d.build.closure).
     area = np.asarray(texture.entry_area, dtype=np.float64)[rows]
     h = float(texture.voxel_size)
