@@ -59,6 +59,11 @@ triangle inequality): 99.2 % of D over the default tree. Only the residual
 ``A_v / (2**bits - 1)`` (``D <= A_v``); rounding to the nearest step stores
 0 below half a step, so D is never farther than F alone. Most of it is 0
 and deflates to nearly nothing; ``bits.density = 0`` drops it (``D = F``).
+Where a thin solid's hidden back was taken out of D (version 4,
+:mod:`aniso3d.build.closure`; F counts the entries' covered areas, a mean
+over directions) D can lie below F: the codes then start ``density_zero``
+steps below 0 (a parameter, absent when nothing is), and D is kept at 0 or
+more.
 
 Every field's quantiser is a pair of functions here (``_encode_*`` and
 ``_decode_*``); :func:`encode` and :func:`decode` run them all. A code array
@@ -743,8 +748,16 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
         a_v = np.bincount(voxel, weights=area, minlength=len(coords))
         residual = np.asarray(arrays["density"], dtype=np.float64) - f
         scale = np.where(a_v > 0, a_v, 1.0)[:, None]
-        codes = _encode_unit(residual / scale, bits.density, 1.0)
+        # Below F where a thin solid's back is hidden (aniso3d.build.closure):
+        # codes then start ``zero`` steps below 0 (version 4; 0 otherwise).
+        top = 2**bits.density - 1
+        hidden = bool(np.any(np.asarray(arrays["entry_cover"]) < 1.0))
+        low = float(np.min(residual / scale, initial=0.0)) if hidden else 0.0
+        zero = min(int(math.ceil(-low * top - 0.5)), top - 1) if low < 0 else 0
+        codes = _encode_unit(residual / scale + zero / top, bits.density, 1.0)
         members["density"] = to_planes(codes.reshape(1, -1), _width(bits.density))
+        if zero:
+            params["density_zero"] = zero
     return members, params
 
 
@@ -848,7 +861,11 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
         if res.size and int(res.max()) >= 2**bits.density:
             raise FormatError(f"density holds codes above {bits.density} bits")
         a_v = np.bincount(voxel, weights=area, minlength=m)
-        density += _decode_unit(res, bits.density, 1.0) * np.where(a_v > 0, a_v, 1.0)[:, None]
+        zero = params.get("density_zero", 0)
+        if isinstance(zero, bool) or not isinstance(zero, int) or not 0 <= zero < 2**bits.density:
+            raise FormatError(f"the encoding parameters are damaged (density_zero is {zero!r})")
+        step = _decode_unit(res, bits.density, 1.0) - zero / (2**bits.density - 1)
+        density = np.maximum(density + step * np.where(a_v > 0, a_v, 1.0)[:, None], 0.0)
     return {
         "origin": origin,
         "shape": shape,
