@@ -162,7 +162,7 @@ class Bits:
     shininess: int = 8
     density: int = 3
     depth: int = 10
-    cover: int = 4
+    cover: int = 6
 
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():
