@@ -1,4 +1,4 @@
-"""What the compact texture encoding (``.a3d`` version 3) costs in bytes and in image error.
+"""What the compact texture encoding (``.a3d`` version 4) costs in bytes and in image error.
 
 Per scene: the mesh, built at ``--resolution`` with K = ``--directions``
 (``build_texture``), its sizes (the mesh as a binary PLY: 12 bytes a vertex,
@@ -44,6 +44,7 @@ from aniso3d.build import scenes
 from aniso3d.build.encoding import DEFAULT_BITS, facet_density
 from aniso3d.build.mesh import Mesh
 from aniso3d.build.texture import AnisoTexture, build_texture
+from aniso3d.build.texture_file import FORMAT_VERSION
 from aniso3d.metrics import psnr
 from aniso3d.rendering.camera import Camera
 from aniso3d.rendering.context import GLContext
@@ -288,7 +289,8 @@ def main() -> None:
         "",
         "**Sizes.** PLY: the mesh as a binary PLY (12 B a vertex, 13 a triangle). Memory: the "
         "texture's arrays as built (`memory_nbytes`; a version 1 file stored these). File: the "
-        f"compact file (format version 3) `save()` writes with `{args.bits}` (`nbytes` with the defaults). "
+        f"compact file (format version {FORMAT_VERSION}) `save()` writes with `{args.bits}` "
+        "(`nbytes` with the defaults). "
         "PSNR: of the texture as built. F vs D: the density sphere derived from the entries, "
         "`F_v(p) = sum_e A_e |n_e . N_p|`, against the registered one, `sum |D - F| / sum D`. "
         "Save, load: seconds of `save()` (encoding, compressing, writing) and `AnisoTexture.load` "
