@@ -1,4 +1,4 @@
-"""The compact encoding of a texture: what an ``.a3d`` file of version 3 stores.
+"""The compact encoding of a texture: what an ``.a3d`` file of version 4 stores.
 
 In memory a texture keeps float64 and float32 arrays, about 400 bytes per
 occupied voxel of the default tree. To store it, each field is quantised no
@@ -29,7 +29,8 @@ entry_kd                    9 bits: steps of S/511 over the values' own range,  
                             S = max(1, largest value)
 entry_ks                    8 bits, likewise                                        S/510
 entry_shininess             8 bits of log2(1 + n), likewise, S = log2(1 + largest)  log2(1 + n) within S/510
-density                     F (see below), plus D - F in 3 bits of A_v              min(D - F, A_v / 14)
+entry_cover (version 4)     6 bits of 2 (1 - c), c in [0.5, 1]                     1/252; 1 exact
+density                     F (see below), plus D - F in 3 bits of A_v              min(|D - F|, A_v / 14)
 ==========================  ======================================================  ===============================
 
 **Copying from a neighbour** (version 3). A leaf, a blade or a bar that
