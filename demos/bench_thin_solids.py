@@ -52,8 +52,7 @@ def _axis_hidden(offsets, directions, closed_normal):
     dirs = np.asarray(directions, dtype=np.float64)
     if not np.any(closed_normal):
         return np.zeros((m, len(dirs)))
-    voxel = np.repeat(np.arange(m), np.diff(offsets))
-    net = np.stack([np.bincount(voxel, closed_normal[:, i], minlength=m) for i in range(3)], axis=1)
+    _, net = closure.voxel_net(offsets, closed_normal)
     both = closure.facet_density(np.ones(len(closed_normal)), closed_normal, offsets, dirs)
     return np.maximum(both - np.abs(net) @ np.abs(dirs).T, 0.0) / 2.0
 
@@ -62,8 +61,7 @@ def _axis_cover(offsets, area, closed_area, closed_normal):
     m = len(offsets) - 1
     if not np.any(np.asarray(closed_area) > 0):
         return np.ones(len(area), dtype=np.float32)
-    voxel = np.repeat(np.arange(m), np.diff(offsets))
-    net = np.stack([np.bincount(voxel, closed_normal[:, i], minlength=m) for i in range(3)], axis=1)
+    voxel, net = closure.voxel_net(offsets, closed_normal)
     total = np.bincount(voxel, closed_area, minlength=m)
     with np.errstate(divide="ignore", invalid="ignore"):
         facing = np.where(total > 0, 1.0 - np.abs(net).sum(axis=1) / total, 0.0)

@@ -65,8 +65,7 @@ def hidden_density(offsets: np.ndarray, directions: np.ndarray, closed_normal: n
     dirs = np.asarray(directions, dtype=np.float64)
     if not np.any(closed_normal):
         return np.zeros((m, len(dirs)))
-    voxel = np.repeat(np.arange(m), np.diff(offsets))
-    net = np.stack([np.bincount(voxel, closed_normal[:, i], minlength=m) for i in range(3)], axis=1)
+    _, net = voxel_net(offsets, closed_normal)
     both = facet_density(np.ones(len(closed_normal)), closed_normal, offsets, dirs)  # D_c: sum_e |V_e . N_p|
     return np.maximum(both - np.abs(net @ dirs.T), 0.0) / 2.0
 
@@ -81,14 +80,22 @@ def entry_cover(
     closed_area = np.asarray(closed_area, dtype=np.float64)
     if not np.any(closed_area > 0):
         return np.ones(len(area), dtype=np.float32)
-    voxel = np.repeat(np.arange(m), np.diff(offsets))
-    closed_normal = np.asarray(closed_normal, dtype=np.float64)
-    net = np.stack([np.bincount(voxel, closed_normal[:, i], minlength=m) for i in range(3)], axis=1)
+    voxel, net = voxel_net(offsets, closed_normal)
     total = np.bincount(voxel, closed_area, minlength=m)
     with np.errstate(divide="ignore", invalid="ignore"):
         facing = np.where(total > 0, 1.0 - np.linalg.norm(net, axis=1) / total, 0.0)
         share = np.where(area > 0, np.clip(closed_area / area, 0.0, 1.0), 0.0)
     return (1.0 - 0.5 * np.clip(facing, 0.0, 1.0)[voxel] * share).astype(np.float32)
+
+
+def voxel_net(offsets: np.ndarray, closed_normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each entry's voxel (E,) and each voxel's closed vector area ``V``
+    (M, 3), the sum of its entries' ``closed_normal`` (E, 3)."""
+    m = len(offsets) - 1
+    voxel = np.repeat(np.arange(m), np.diff(offsets))
+    closed_normal = np.asarray(closed_normal, dtype=np.float64)
+    net = np.stack([np.bincount(voxel, closed_normal[:, i], minlength=m) for i in range(3)], axis=1)
+    return voxel, net
 
 
 def facet_density(area: np.ndarray, normal: np.ndarray, offsets: np.ndarray, directions: np.ndarray) -> np.ndarray:
