@@ -2,6 +2,8 @@
 #ifdef AA
 // Image atomics (OpenGL 4.2; the volume renderer already needs 4.3).
 #extension GL_ARB_shader_image_load_store : require
+// Image units set in the shader (layout binding).
+#extension GL_ARB_shading_language_420pack : require
 #endif
 // Splat renderer (c), fragment stage: the exact ray-splat intersection.
 // In: SplatData (flat, from splat.vert or splat.geom; see splat.vert for the
@@ -47,13 +49,19 @@
 // surfaces by depth (aniso3d/rendering/splat/reference.py, the NumPy twin,
 // states the rule):
 //   PASS 1 writes the pushed depth z + push (the visible depth, kept for
-//     compositing with other draws) and sets the bit of z's slice in the
+//     compositing with other draws), sets the bit of z's slice in the
 //     pixel's occupancy mask u_mask (SLICES slices over the cloud's depths,
-//     u_slices) by atomic OR; splat_surfaces.frag then finds where the
-//     pixel's surfaces start (u_surfaces);
+//     u_slices) by atomic OR, and adds c to the pixel's coverage sum (the
+//     mask's last word, fixed point, COVER_SCALE a unit); splat_surfaces.frag
+//     then finds where the pixel's surfaces start (u_surfaces);
 //   PASS 2 adds (RGB c, c) to the layer of the fragment's surface: layer k
 //     holds the k-th surface from the front, the last (LAYERS - 1) every
-//     surface from there on. A splat whose box is wider than u_shade_box
+//     surface from there on, where a fragment of the layer's j-th surface
+//     adds (RGB c w, c w), w = (1 - a_s)^j, a_s = min(1, the pixel's
+//     coverage sum (u_cover) / its number of surfaces): what the j surfaces
+//     in front leave of it had they the mean coverage each (j from the
+//     fragment's depth, the layer's surfaces taken to spread evenly from its
+//     first slice to the first slice of the pixel's last surface). A splat whose box is wider than u_shade_box
 //     pixels is shaded per fragment in layer 0 (in the geometry path, which
 //     aniso3d/rendering/splat sends those splats through); any other
 //     fragment takes its splat's colour shaded once at the centre
@@ -71,6 +79,12 @@
 #error 1 to 7 layers (one draw buffer each; splat_surfaces.frag packs their starts)
 #endif
 #define MIN_COVERAGE 1e-4
+#ifndef LAST_WEIGHTS  // aniso3d/rendering/splat/params.py (AA_LAST_WEIGHTS)
+#define LAST_WEIGHTS 1
+#endif
+// Coverage sums in fixed point: this many units a whole pixel (2^16 pixels'
+// worth fit in 32 bits: far more surfaces than a pixel holds).
+#define COVER_SCALE 65536.0
 #endif
 
 #ifndef PASS
@@ -87,7 +101,8 @@ uniform vec2 u_depth;   // (K, t0 - near): window depth = K (t - near) / t
 uniform float u_range;  // far - near
 uniform vec2 u_slices;  // (lo, scale): slice coordinate (z - lo) scale of a linear depth z
 #if PASS == 1
-layout(r32ui) uniform uimage2DArray u_mask;  // SLICES / 32 words per pixel
+// SLICES / 32 words per pixel, then the coverage sum.
+layout(r32ui) uniform uimage2DArray u_mask;
 #endif
 #endif
 #if PASS == 0 && defined(FORWARD)
@@ -103,7 +118,11 @@ uniform mat3 u_ray;
 // splat_surfaces.frag's output, where the pixel's surfaces start, read as an
 // image: llvmpipe's image load costs about half its texel fetch, which ran
 // for every fragment of the pass (0.2 s of a 1M-point frame at 1024^2).
-layout(rgba32ui) readonly uniform uimage2D u_surfaces;
+layout(binding = 0, rgba32ui) readonly uniform uimage2D u_surfaces;
+#if LAYERS > 1
+// The pixel's coverage sum and its last surface's first slice (splat_surfaces.frag).
+layout(binding = 1, rg32f) readonly uniform image2D u_cover;
+#endif
 #ifdef GEOMETRY_PATH
 uniform float u_shade_box;    // splats of wider boxes are shaded per pixel
 #endif
@@ -171,13 +190,17 @@ void mark(float u) {
     uint bit = 1u << uint(k & 31);
     if ((imageLoad(u_mask, at).r & bit) == 0u) imageAtomicOr(u_mask, at, bit);
 }
+
+// Add coverage c to the pixel's sum.
+void add_cover(float c) {
+    imageAtomicAdd(u_mask, ivec3(ivec2(gl_FragCoord.xy), SLICES >> 5), uint(c * COVER_SCALE + 0.5));
+}
 #endif
 #if defined(AA) && PASS == 2
 // This fragment's layer: how many of the surfaces after the first start at or
 // before its slice (splat_surfaces.frag packs the starts in 16 bits each).
-int layer_of(float u) {
+int layer_of(float u, uvec4 r) {
     uint s = uint(clamp(int(floor(u)), 0, SLICES - 1));
-    uvec4 r = imageLoad(u_surfaces, ivec2(gl_FragCoord.xy));
     // Plain comparisons, no local array: llvmpipe puts an indexed local
     // array in memory, which cost more than the texel fetch.
     int k = 0;
@@ -201,6 +224,35 @@ int layer_of(float u) {
 #endif
     return k;
 }
+
+#if LAYERS > 1 && LAST_WEIGHTS
+// The weight of a fragment at slice coordinate u in the last layer: (1 -
+// a_s)^j, j its surface's place in the layer (0 the layer's first), taken
+// from the depths: the layer's n surfaces spread evenly from its first
+// slice to its last surface's first slice (u_cover.g).
+float last_layer_weight(float u, uvec4 r) {
+    uint n = r.w >> 16;
+    if (n <= uint(LAYERS)) return 1.0;  // the layer holds one surface
+#if LAYERS == 2
+    uint first = r.x & 0xFFFFu;
+#elif LAYERS == 3
+    uint first = r.x >> 16;
+#elif LAYERS == 4
+    uint first = r.y & 0xFFFFu;
+#elif LAYERS == 5
+    uint first = r.y >> 16;
+#elif LAYERS == 6
+    uint first = r.z & 0xFFFFu;
+#else
+    uint first = r.z >> 16;
+#endif
+    vec2 cover = imageLoad(u_cover, ivec2(gl_FragCoord.xy)).rg;
+    float s = float(clamp(int(floor(u)), 0, SLICES - 1));
+    float j = max(s - float(first), 0.0) / max(cover.y - float(first), 1.0) * float(n - uint(LAYERS));
+    float a = min(cover.x / float(n), 1.0);
+    return a >= 1.0 ? (j > 0.0 ? 0.0 : 1.0) : exp2(j * log2(1.0 - a));
+}
+#endif
 #endif
 
 void main() {
@@ -228,10 +280,12 @@ void main() {
     float u = slice_of(z);
 #if PASS == 1
     mark(u);
+    add_cover(c);
     // Below 1, so the surfaces pass (an early depth test) visits every marked pixel.
     gl_FragDepth = clamp(z + fs_in.pushz, 0.0, 0.99999);
 #elif PASS == 2
-    int layer = layer_of(u);
+    uvec4 surfaces = imageLoad(u_surfaces, ivec2(gl_FragCoord.xy));
+    int layer = layer_of(u, surfaces);
     vec3 rgb = fs_in.rgb;
 #ifdef GEOMETRY_PATH
     vec2 extent = fs_in.clip.zw - fs_in.clip.xy;
@@ -240,7 +294,12 @@ void main() {
         rgb = clamp(shade(fs_in.n, -normalize(d), fs_in.kd, fs_in.spec.x, fs_in.spec.y, length(fs_in.n)), 0.0, 1.0);
     }
 #endif
+#if LAYERS > 1 && LAST_WEIGHTS
+    float w = layer == LAYERS - 1 ? last_layer_weight(u, surfaces) : 1.0;
+    vec4 v = vec4(rgb * (c * w), c * w);
+#else
     vec4 v = vec4(rgb * c, c);
+#endif
     // One assignment per output, not a loop over the output array: llvmpipe
     // lowered that to indexed stores, which cost 0.6 s of a 1M-point frame.
     f_layer[0] = layer == 0 ? v : vec4(0.0);

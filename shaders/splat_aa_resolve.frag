@@ -19,7 +19,9 @@
 //     would show through every pixel below 1;
 //   the last layer holds n = surfaces - (LAYERS - 1) surfaces, taken to share
 //     its sum equally: a = 1 - (1 - min(1, sum c / n))^n (exact for equal
-//     ones, less than independent unequal ones would cover);
+//     ones, less than independent unequal ones would cover); its colour
+//     sums were weighted (splat.frag, PASS 2), so where n > 1 its sum of c
+//     is the pixel's (u_cover) less the other layers';
 //   surfaces in front hide those behind at random: front to back, with T the
 //     transmittance left (starts at 1), each layer adds T a of its
 //     coverage-weighted mean colour and T *= 1 - a (an opaque layer ends it).
@@ -40,6 +42,7 @@
 
 uniform sampler2D u_layer[LAYERS];
 uniform usampler2D u_surfaces;
+uniform sampler2D u_cover;     // the pixel's coverage sum in r (splat_surfaces.frag)
 uniform sampler2D u_visible;  // linear depth (t - near) / (far - near), pushed
 uniform vec2 u_depth;          // (K, t0 - near): window depth = K (t - near) / t
 uniform float u_near;
@@ -50,17 +53,22 @@ uniform int u_mode;
 
 out vec4 f_color;
 
-// One layer of n surfaces (sampler arrays take constant indices only in GLSL
-// 3.30, so the loop over layers is unrolled below); is_whole: coverage 1.
-void layer(vec4 acc, float n, bool is_whole, inout vec3 colour, inout float trans) {
+// One layer of n surfaces, whose coverages sum to total (acc.a, but for a
+// last layer of weighted sums) (the loop over layers is unrolled below, the
+// sampler array taking constant indices); is_whole: coverage 1.
+void layer(vec4 acc, float n, float total, bool is_whole, inout vec3 colour, inout float trans) {
     if (acc.a > 0.0) {
-        float a = is_whole ? 1.0 : n > 1.0 ? 1.0 - pow(1.0 - min(acc.a / n, 1.0), n) : min(acc.a, 1.0);
+        float a = is_whole ? 1.0 : n > 1.0 ? 1.0 - pow(1.0 - min(total / n, 1.0), n) : min(total, 1.0);
         colour += trans * a * (acc.rgb / acc.a);
         trans *= 1.0 - a;
     }
 }
 
-#define LAYER(i) layer(texelFetch(u_layer[i], px, 0), i == LAYERS - 1 ? last : 1.0, false, colour, trans)
+#define LAYER(i) \
+    acc = texelFetch(u_layer[i], px, 0); \
+    if (i < LAYERS - 1) front += acc.a; \
+    layer(acc, i == LAYERS - 1 ? last : 1.0, i == LAYERS - 1 && last > 1.0 ? max(cover - front, 0.0) : acc.a, \
+          false, colour, trans)
 
 // What a neighbour q adds to the whole-surface test: min(1, its first
 // layer's sum) where its nearest surface starts within CLOSE_REACH spans of
@@ -92,8 +100,11 @@ void main() {
     float trans = 1.0;
     uint sw = texelFetch(u_surfaces, px, 0).w;
     float last = max(float(sw >> 16) - float(LAYERS - 1), 1.0);
+    float cover = texelFetch(u_cover, px, 0).r;
     vec4 first = texelFetch(u_layer[0], px, 0);
-    layer(first, LAYERS == 1 ? last : 1.0, LAYERS > 1 && whole(px, first.a, float(sw & 0xFFFFu)), colour, trans);
+    vec4 acc;
+    float front = first.a;
+    layer(first, LAYERS == 1 ? last : 1.0, first.a, LAYERS > 1 && whole(px, first.a, float(sw & 0xFFFFu)), colour, trans);
 #if LAYERS > 1
     LAYER(1);
 #endif

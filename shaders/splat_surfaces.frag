@@ -12,8 +12,10 @@
 // Out: f_surfaces, the first slices of surfaces 1 .. LAYERS - 1, 16 bits
 // each in x, y and z (0xFFFF where there is no such surface; LAYERS <= 7),
 // the first slice of surface 0 (the nearest) in the low half of w, and the
-// number of surfaces in its high half; the mask is cleared on the way (for
-// the next draw).
+// number of surfaces in its high half; f_cover, the pixel's coverage sum
+// (the mask's last word, fixed point, COVER_SCALE a unit) and the first
+// slice of its last surface. The mask and the sum are cleared on the way
+// (for the next draw).
 #ifndef LAYERS
 #define LAYERS 4
 #endif
@@ -23,6 +25,7 @@
 #if LAYERS > 7
 #error at most 7 layers (their starts and surface 0's share 128 bits)
 #endif
+#define COVER_SCALE 65536.0  // as splat.frag's
 
 // Only pixels something was drawn in (the visibility depth below 1): the
 // depth test runs first (splat_resolve.vert with FAR, depth test GREATER).
@@ -31,32 +34,39 @@ layout(early_fragment_tests) in;
 layout(r32ui) uniform uimage2DArray u_mask;
 uniform float u_span;
 
-out uvec4 f_surfaces;
+layout(location = 0) out uvec4 f_surfaces;
+layout(location = 1) out vec2 f_cover;
 
 void main() {
     ivec2 px = ivec2(gl_FragCoord.xy);
     uint starts[8] = uint[8](0xFFFFu, 0xFFFFu, 0xFFFFu, 0xFFFFu, 0xFFFFu, 0xFFFFu, 0xFFFFu, 0xFFFFu);
     uint count = 0u;
     float limit = -1.0;  // the current surface takes the slices below this
+    int last = 0;        // the last surface's first slice
     for (int k = 0; k < WORDS; ++k) {
         uint w = imageLoad(u_mask, ivec3(px, k)).r;
         if (w == 0u) continue;
         imageStore(u_mask, ivec3(px, k), uvec4(0u));
         // Drop the slices the current surface still takes.
         float skip = limit - float(32 * k);
-        if (skip > 31.0) continue;
-        if (skip > 0.0) w &= ~((1u << uint(ceil(skip))) - 1u);
-        while (w != 0u) {
-            int s = 32 * k + findLSB(w);
-            if (count == 0u) starts[6] = uint(s);
-            if (count >= 1u && count < uint(LAYERS)) starts[count - 1u] = uint(s);
-            count += 1u;
-            limit = float(s) + u_span;
-            skip = limit - float(32 * k);
-            if (skip > 31.0) break;
-            w &= ~((1u << uint(ceil(skip))) - 1u);
+        if (skip <= 31.0) {
+            if (skip > 0.0) w &= ~((1u << uint(ceil(skip))) - 1u);
+            while (w != 0u) {
+                int s = 32 * k + findLSB(w);
+                if (count == 0u) starts[6] = uint(s);
+                if (count >= 1u && count < uint(LAYERS)) starts[count - 1u] = uint(s);
+                last = s;
+                count += 1u;
+                limit = float(s) + u_span;
+                skip = limit - float(32 * k);
+                if (skip > 31.0) break;
+                w &= ~((1u << uint(ceil(skip))) - 1u);
+            }
         }
     }
+    ivec3 sum_at = ivec3(px, WORDS);
+    f_cover = vec2(float(imageLoad(u_mask, sum_at).r) / COVER_SCALE, float(last));
+    imageStore(u_mask, sum_at, uvec4(0u));
     f_surfaces = uvec4(starts[0] | (starts[1] << 16), starts[2] | (starts[3] << 16),
                    starts[4] | (starts[5] << 16), starts[6] | (min(count, 0xFFFFu) << 16));
 }

@@ -53,9 +53,12 @@ from aniso3d.rendering.splat.pipeline import SplatPipeline, Targets
 #: Image unit the occupancy mask of quality "high" is bound to (visibility and
 #: surfaces passes), and the surfaces texture (accumulation pass). Both stay 0,
 #: the image uniforms' default: setting an image uniform to another unit through
-#: moderngl did not take on llvmpipe (the loads read zeros).
+#: moderngl did not take on llvmpipe (the loads read zeros). The accumulation
+#: pass's second image, the coverage sums, names its unit in the shader
+#: (``layout(binding = 1)``).
 MASK_UNIT = 0
 SURFACES_UNIT = 0
+COVER_UNIT = 1
 
 
 def visible_then_accumulate(
@@ -129,18 +132,20 @@ class HighPass:
         """The shared targets plus the mask, the surfaces and the layers."""
         tg = self.pipe.targets(size)
         words = AA_SLICES // 32
-        if tg.mask is None or tg.mask.layers != words or len(tg.layers) != AA_LAYERS:
+        if tg.mask is None or tg.mask.layers != words + 1 or len(tg.layers) != AA_LAYERS:
             gl = self.pipe.gl
-            gl.free(tg.layered, tg.surfaces_fbo, tg.mask, tg.surfaces, *tg.layers)
+            gl.free(tg.layered, tg.surfaces_fbo, tg.mask, tg.surfaces, tg.cover, *tg.layers)
             # Cleared here; then the surfaces pass clears what each draw set.
-            zeros = np.zeros(size[0] * size[1] * words, "u4")
-            tg.mask = gl.track(gl.ctx.texture_array((*size, words), 1, zeros, dtype="u4"))
+            zeros = np.zeros(size[0] * size[1] * (words + 1), "u4")
+            tg.mask = gl.track(gl.ctx.texture_array((*size, words + 1), 1, zeros, dtype="u4"))
             tg.surfaces = gl.track(gl.ctx.texture(size, 4, dtype="u4"))
+            tg.cover = gl.track(gl.ctx.texture(size, 2, dtype="f4"))
             tg.layers = tuple(gl.track(gl.ctx.texture(size, 4, dtype=AA_DTYPE)) for _ in range(AA_LAYERS))
-            for tex in (tg.mask, tg.surfaces, *tg.layers):
+            for tex in (tg.mask, tg.surfaces, tg.cover, *tg.layers):
                 tex.filter = moderngl.NEAREST, moderngl.NEAREST
             # With the visibility depth: the surfaces pass runs where something was drawn.
-            tg.surfaces_fbo = gl.track(gl.ctx.framebuffer(color_attachments=[tg.surfaces], depth_attachment=tg.depth))
+            tg.surfaces_fbo = gl.track(gl.ctx.framebuffer(color_attachments=[tg.surfaces, tg.cover],
+                                                          depth_attachment=tg.depth))  # fmt: skip
             tg.layered = gl.track(gl.ctx.framebuffer(color_attachments=list(tg.layers)))
         return tg
 
@@ -179,10 +184,11 @@ class HighPass:
         ctx.blend_equation = moderngl.FUNC_ADD
         ctx.blend_func = moderngl.ONE, moderngl.ONE
         tg.surfaces.bind_to_image(SURFACES_UNIT, read=True, write=False)
-        pipe.splats(handle, view, opts, "accumulate", {**uniforms, "u_surfaces": SURFACES_UNIT})
+        tg.cover.bind_to_image(COVER_UNIT, read=True, write=False)
+        pipe.splats(handle, view, opts, "accumulate", {**uniforms, "u_surfaces": SURFACES_UNIT, "u_cover": COVER_UNIT})
         ctx.disable(moderngl.BLEND)
         ctx.enable(moderngl.DEPTH_TEST)
-        textures = {"u_visible": tg.depth, "u_surfaces": tg.surfaces}
+        textures = {"u_visible": tg.depth, "u_surfaces": tg.surfaces, "u_cover": tg.cover}
         for i, tex in enumerate(tg.layers):
             textures[f"u_layer[{i}]"] = tex
         prog, vao = pipe.resolve("splat_aa_resolve.frag", textures, uniforms, target, viewport, aa=True)

@@ -12,6 +12,7 @@ import numpy as np
 from aniso3d.grid import tangent_frame
 from aniso3d.rendering.frame import FrameView
 from aniso3d.rendering.splat.options import DEFAULT_ASPECT, SplatOptions, default_size_factor, shape_extent
+from aniso3d.rendering.splat import params
 from aniso3d.rendering.splat.params import AA_SLICES, AA_SPAN
 
 
@@ -96,11 +97,12 @@ def mask_slicing(
     (median) ``sqrt(area)`` is ``typical_size``: (lo, scale, span). A linear
     depth z = (t - near) / (far - near) lies in slice ``floor((z - lo) * scale)``
     (:data:`~aniso3d.rendering.splat.params.AA_SLICES` slices over the cloud's
-    depths); one surface spans ``span`` slices (at least 1):
+    depths); one surface spans ``span`` slices:
     :data:`~aniso3d.rendering.splat.params.AA_SPAN` times ``push`` times a
-    typical splat's larger half-axis."""
+    typical splat's larger half-axis, at least
+    :data:`~aniso3d.rendering.splat.params.AA_SPAN_MIN`."""
     near, far = float(view.near), float(view.far)
     lo, hi = (min(max((d - near) / (far - near), 0.0), 1.0) for d in (depth_lo, depth_hi))
     scale = AA_SLICES / max(hi - lo, 1e-30)
     span = AA_SPAN * opts.push * typical_size * max(opts.extent) / (far - near) * scale
-    return lo, scale, max(span, 1.0)
+    return lo, scale, max(span, params.AA_SPAN_MIN)

@@ -26,6 +26,7 @@ from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.frame import FrameView
 from aniso3d.rendering.splat.buffers import ATTRIBUTES, GPULodPoints, GPUPoints
 from aniso3d.rendering.splat.culling import depth_range, large_blocks
+from aniso3d.rendering.splat import params
 from aniso3d.rendering.splat.geometry import mask_slicing
 from aniso3d.rendering.splat.options import SplatOptions
 from aniso3d.rendering.splat.params import (
@@ -46,8 +47,10 @@ class Targets:
     texture (geometry pass of "fast", visibility pass of "high" and "blend")
     and its framebuffer; the point ids (R32UI, "fast"), the accumulation
     texture ("blend") and, for "high", the occupancy ``mask`` (an R32UI array
-    of :data:`~aniso3d.rendering.splat.params.AA_SLICES` / 32 layers), the
-    ``surfaces`` texture (RGBA32UI) and its framebuffer, and the ``layers``
+    of :data:`~aniso3d.rendering.splat.params.AA_SLICES` / 32 layers and one
+    more for each pixel's coverage sum), the ``surfaces`` texture (RGBA32UI)
+    and the ``cover`` texture (R32F, the coverage sums) and their
+    framebuffer, and the ``layers``
     (:data:`~aniso3d.rendering.splat.params.AA_LAYERS` RGBA textures) and
     theirs, each made by its pass."""
 
@@ -59,6 +62,7 @@ class Targets:
     accumulate: moderngl.Framebuffer | None = None
     mask: moderngl.TextureArray | None = None
     surfaces: moderngl.Texture | None = None
+    cover: moderngl.Texture | None = None
     surfaces_fbo: moderngl.Framebuffer | None = None
     layers: tuple = ()
     layered: moderngl.Framebuffer | None = None
@@ -70,7 +74,7 @@ class Targets:
 
     def objects(self) -> tuple:
         return (self.geometry, self.accumulate, self.surfaces_fbo, self.layered, self.visibility, self.ids,
-                self.accum, self.mask, self.surfaces, *self.layers, self.depth)  # fmt: skip
+                self.accum, self.mask, self.surfaces, self.cover, *self.layers, self.depth)  # fmt: skip
 
 
 def reach(opts: SplatOptions) -> float | None:
@@ -104,7 +108,8 @@ class SplatPipeline:
         defines["PASS"] = {"geometry": 0, "visibility": 1, "accumulate": 2}[kind]
         if aa:
             defines.update(
-                AA=1, LAYERS=AA_LAYERS, SLICES=AA_SLICES, FILTER=AA_FILTER, PLANE_REACH=float(AA_PLANE_REACH)
+                AA=1, LAYERS=AA_LAYERS, SLICES=AA_SLICES, FILTER=AA_FILTER, PLANE_REACH=float(AA_PLANE_REACH),
+                LAST_WEIGHTS=int(params.AA_LAST_WEIGHTS),
             )
         if sprite:
             return self.gl.program("splat.vert", "splat.frag", defines=defines)

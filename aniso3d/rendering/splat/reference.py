@@ -20,8 +20,16 @@ fraction of the pixel a splat covers; linear depth z; colour):
    the last layer every surface from there on.
 5. Within a surface splats tile it, so coverages add: a = min(1, sum c); the
    last layer's n surfaces are taken to share its sum equally,
-   a = 1 - (1 - min(1, sum c / n))^n. Its colour is the coverage-weighted
-   mean of its fragments' colours. The nearest surface is whole (a = 1)
+   a = 1 - (1 - min(1, sum c / n))^n. A layer's colour is the
+   coverage-weighted mean of its fragments' colours; in the last layer a
+   fragment weighs c (1 - a_s)^j, where a_s = min(1, sum of the pixel's c /
+   its number of surfaces) is the pixel's mean surface coverage and j the
+   place of the fragment's surface among the layer's n (0 the layer's
+   first), taken from its slice: the surfaces spread evenly from the layer's
+   first slice to the first slice of the pixel's last surface, j = (n - 1)
+   (slice - first) / (last - first): what the j surfaces in front leave of
+   it, had they that coverage each (for equal, evenly spaced surfaces
+   exactly what independent layers give). The nearest surface is whole (a = 1)
    where the mean of min(1, sum) over the pixel and its four neighbours
    reaches ``mean`` (:data:`~aniso3d.rendering.splat.params.AA_CLOSE`),
    a neighbour counting where its nearest surface starts less than ``reach``
@@ -45,6 +53,7 @@ from aniso3d.errors import InputError
 from aniso3d.grid import tangent_frame
 from aniso3d.rendering.frame import FrameView
 from aniso3d.rendering.lighting import shade_np
+from aniso3d.rendering.splat import params
 from aniso3d.rendering.splat.geometry import mask_slicing
 from aniso3d.rendering.splat.options import SplatOptions
 from aniso3d.rendering.splat.params import AA_CLOSE, AA_FILTER, AA_LAYERS, AA_PLANE_REACH, AA_REGIME, AA_SLICES
@@ -225,12 +234,16 @@ def closed_np(own: np.ndarray, start: np.ndarray, span: float) -> np.ndarray:
 
 
 def composite_np(
-    frags: Fragments, background=(1.0, 1.0, 1.0), layers: int = AA_LAYERS
+    frags: Fragments, background=(1.0, 1.0, 1.0), layers: int = AA_LAYERS, last_weights: bool | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """The image quality "high" composites from ``frags`` over ``background``
     (the module docstring's rule): (rgb (H, W, 3), alpha (H, W)), float64,
     row 0 at the top; rgb = composited colour + (1 - alpha) background, as
-    drawn over a target cleared to the background."""
+    drawn over a target cleared to the background. ``last_weights``: weigh
+    the last layer's surfaces (step 5), default
+    :data:`~aniso3d.rendering.splat.params.AA_LAST_WEIGHTS`."""
+    if last_weights is None:
+        last_weights = params.AA_LAST_WEIGHTS
     w, h = frags.size
     lo, scale, span = frags.slicing
     keep = frags.coverage >= MIN_COVERAGE
@@ -241,8 +254,23 @@ def composite_np(
     layer = np.minimum(surface, layers - 1)
     total = np.zeros((w * h, layers))
     colour = np.zeros((w * h, layers, 3))
+    weight = np.zeros((w * h, layers))
     np.add.at(total, (pixel, layer), c)
-    np.add.at(colour, (pixel, layer), rgb * c[:, None])
+    # The last layer's colour: each surface weighted by what the surfaces in
+    # front of it leave, at the pixel's mean surface coverage.
+    mean_cover = np.minimum(np.bincount(pixel, c, w * h) / np.maximum(count, 1), 1.0)
+    if layers > 1 and last_weights:
+        first = starts[:, layers - 1] if starts.shape[1] >= layers else np.full(w * h, np.inf)
+        last_start = np.where(np.isfinite(starts), starts, -np.inf).max(axis=1)
+        n_last = np.maximum(count - (layers - 1), 1)
+        first_f, spread = first[pixel], np.maximum(last_start - first, 1.0)[pixel]
+        in_last = (n_last[pixel] > 1) & (s >= first_f)
+        j = np.where(in_last, (s - np.where(in_last, first_f, 0.0)) / spread * (n_last[pixel] - 1), 0.0)
+    else:
+        j = np.zeros(len(s))
+    cw = c * np.where(j > 0, (1.0 - mean_cover[pixel]) ** j, 1.0)
+    np.add.at(weight, (pixel, layer), cw)
+    np.add.at(colour, (pixel, layer), rgb * cw[:, None])
     whole = closed_np(total[:, 0].reshape(h, w), starts[:, 0].reshape(h, w), span).ravel() & (layers > 1)
     out = np.zeros((w * h, 3))
     trans = np.ones(w * h)
@@ -253,7 +281,8 @@ def composite_np(
         a = np.where(n > 1, 1.0 - (1.0 - np.minimum(a_sum / n, 1.0)) ** n, np.minimum(a_sum, 1.0))
         if k == 0:
             a = np.where(whole, 1.0, a)
-        mean = np.divide(colour[:, k], a_sum[:, None], out=np.zeros((w * h, 3)), where=a_sum[:, None] > 0)
+        wk = weight[:, k][:, None]
+        mean = np.divide(colour[:, k], wk, out=np.zeros((w * h, 3)), where=wk > 0)
         out += (trans * a)[:, None] * mean
         trans *= 1.0 - a
     out += trans[:, None] * np.asarray(background, np.float64)

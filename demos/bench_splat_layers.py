@@ -1,0 +1,131 @@
+"""What the last layer's weights and the least surface span do to quality
+"high" splats, on the corpus at the corpus bench's two cameras.
+
+Quality "high" keeps the first ``AA_LAYERS - 1`` surfaces of a pixel in one
+layer each and every surface from there on in the last. Two rules are
+measured, each on and off (``aniso3d.rendering.splat.params``):
+
+- ``AA_LAST_WEIGHTS``: the last layer weighs each surface's colour by what
+  the surfaces in front of it leave, ``(1 - a_s)^j`` (off: an equal-weight
+  mean, which gave the deepest surfaces of dense foliage as much weight as
+  the front one);
+- ``AA_SPAN_MIN``: the least span of a surface, 2 slices (off: 1, where a
+  sheet whose fragments' depths straddle a slice boundary split in two
+  surfaces that composed as independent layers).
+
+Per scene and camera: PSNR (dB) / FLIP against 8x8 polygons in the object's
+box, as the corpus bench measures, for 1-spp and 2x2 polygons and the four
+variants (``before``: both off; ``both``: the defaults). The images are
+deterministic: no spread to report.
+
+    .venv/bin/python demos/bench_splat_layers.py [tree bush ...] [--size 512] [--md docs/splat_aa.md]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+from contextlib import contextmanager
+
+from aniso3d import metrics
+from aniso3d.bench.corpus import corpus_cameras
+from aniso3d.bench.outputs import markdown_table, write_between_markers
+from aniso3d.bench.run import code_version
+from aniso3d.build import scenes
+from aniso3d.build.texture import build_texture
+from aniso3d.rendering.context import GLContext
+from aniso3d.rendering.renderer import Renderer
+from aniso3d.rendering.splat import params
+
+BEGIN = "<!-- bench_splat_layers: begin -->"
+END = "<!-- bench_splat_layers: end -->"
+#: variant: (AA_LAST_WEIGHTS, AA_SPAN_MIN)
+VARIANTS = {"before": (False, 1.0), "weights": (True, 1.0), "span": (False, 2.0), "both": (True, 2.0)}
+
+
+@contextmanager
+def variant(name: str):
+    saved = params.AA_LAST_WEIGHTS, params.AA_SPAN_MIN
+    params.AA_LAST_WEIGHTS, params.AA_SPAN_MIN = VARIANTS[name]
+    try:
+        yield
+    finally:
+        params.AA_LAST_WEIGHTS, params.AA_SPAN_MIN = saved
+
+
+def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
+    mesh = scenes.get_scene(name)
+    points = build_texture(mesh, args.resolution, args.directions).to_points()
+    rows = []
+    for spec in corpus_cameras(mesh, (args.size, args.size), args.resolution):
+        truth = renderer.render(mesh, spec.camera, "mesh", ssaa=args.gt_ssaa)
+        row = {"scene": name, "camera": spec.label}
+        for label, ssaa in (("1 spp", 1), ("2x2", 2)):
+            m = metrics.compare_in_box(truth, renderer.render(mesh, spec.camera, "mesh", ssaa=ssaa), spec.crop,
+                                       with_flip=True)  # fmt: skip
+            row[label] = (m["psnr"], m["flip"])
+        for v in VARIANTS:
+            with variant(v):
+                img = renderer.render(points, spec.camera, "splat", quality="high")
+            m = metrics.compare_in_box(truth, img, spec.crop, with_flip=True)
+            row[v] = (m["psnr"], m["flip"])
+        rows.append(row)
+        print(f"  {spec.label}: " + ", ".join(f"{k} {v[0]:.2f}/{v[1]:.4f}" for k, v in row.items()
+                                              if isinstance(v, tuple)), flush=True)  # fmt: skip
+    return rows
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("scenes", nargs="*", default=list(scenes.CORPUS))
+    ap.add_argument("--size", type=int, default=512)
+    ap.add_argument("--gt-ssaa", type=int, default=8)
+    ap.add_argument("--resolution", type=int, default=128)
+    ap.add_argument("--directions", type=int, default=16)
+    ap.add_argument("--md", default="", help="Markdown file to write the table into (between its markers)")
+    args = ap.parse_args()
+
+    started, load0 = time.time(), os.getloadavg()
+    version = code_version(("aniso3d", "shaders", "demos"))
+    commit = (version["commit"] or "unknown")[:7]
+    commit += " (with uncommitted changes to the code)" if version["dirty"] else ""
+    rows = []
+    with GLContext("auto") as gl, Renderer((args.size, args.size), gl=gl) as renderer:
+        gl_name = gl.renderer
+        for name in args.scenes:
+            print(f"{name}:", flush=True)
+            rows += run_scene(name, args, renderer)
+    load1, minutes = os.getloadavg(), (time.time() - started) / 60
+
+    columns = ["1 spp", "2x2", *VARIANTS]
+    table = []
+    for r in rows:
+        beats = r["both"][0] >= r["2x2"][0] and r["both"][1] <= r["2x2"][1]
+        table.append([r["scene"], r["camera"], *(f"{r[c][0]:.2f} / {r[c][1]:.4f}" for c in columns),
+                      f"{r['both'][0] - r['before'][0]:+.2f}", f"{r['both'][1] - r['before'][1]:+.4f}",
+                      "yes" if beats else "no"])  # fmt: skip
+    parts = [
+        BEGIN,
+        f"Run {time.strftime('%Y-%m-%d %H:%M')} at commit {commit} in {minutes:.1f} min on {gl_name}, "
+        f"{platform.machine()}, {os.cpu_count()} CPUs, load average (1, 5, 15 min) "
+        f"{load0[0]:.1f} {load0[1]:.1f} {load0[2]:.1f} at the start and {load1[0]:.1f} {load1[1]:.1f} "
+        f"{load1[2]:.1f} at the end; `demos/bench_splat_layers.py {' '.join(args.scenes)} --size {args.size}`. "
+        f"Texture {args.resolution}^3, K = {args.directions}, disc splats, quality \"high\"; truth "
+        f"{args.gt_ssaa}x{args.gt_ssaa} polygons; PSNR (dB) / FLIP inside the object's box, as the corpus bench. "
+        "before: an equal-weight last layer and a least span of 1 slice; weights, span: one rule each; both: "
+        "the defaults. Δ: both - before. ≥ 2x2: both at least as good as 2x2 polygons in PSNR and FLIP.",
+        "",
+        markdown_table(["scene", "camera", *columns, "Δ PSNR", "Δ FLIP", "≥ 2x2"], table),
+        END,
+    ]
+    block = "\n".join(parts)
+    print("\n" + block)
+    if args.md:
+        path = write_between_markers(args.md, block, BEGIN, END, title="# Anti-aliased splats\n\n")
+        print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
