@@ -33,6 +33,7 @@ from aniso3d import metrics
 from aniso3d.bench.corpus import corpus_cameras
 from aniso3d.bench.outputs import markdown_table, write_between_markers
 from aniso3d.bench.run import code_version
+from aniso3d.bench.settings import BASELINE
 from aniso3d.build import scenes
 from aniso3d.build.texture import build_texture
 from aniso3d.rendering.context import GLContext
@@ -57,7 +58,8 @@ def variant(name: str):
 
 def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
     mesh = scenes.get_scene(name)
-    points = build_texture(mesh, args.resolution, args.directions).to_points()
+    tex = build_texture(mesh, args.resolution, args.directions)
+    points = tex.to_points(BASELINE["placement"], BASELINE["per_entry"], BASELINE["point_normal"])
     rows = []
     for spec in corpus_cameras(mesh, (args.size, args.size), args.resolution):
         truth = renderer.render(mesh, spec.camera, "mesh", ssaa=args.gt_ssaa)
@@ -68,7 +70,7 @@ def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
             row[label] = (m["psnr"], m["flip"])
         for v in VARIANTS:
             with variant(v):
-                img = renderer.render(points, spec.camera, "splat", quality="high")
+                img = renderer.render(points, spec.camera, "splat", splat=BASELINE["splat"], quality="high")
             m = metrics.compare_in_box(truth, img, spec.crop, with_flip=True)
             row[v] = (m["psnr"], m["flip"])
         rows.append(row)
@@ -112,7 +114,8 @@ def main() -> None:
         f"{platform.machine()}, {os.cpu_count()} CPUs, load average (1, 5, 15 min) "
         f"{load0[0]:.1f} {load0[1]:.1f} {load0[2]:.1f} at the start and {load1[0]:.1f} {load1[1]:.1f} "
         f"{load1[2]:.1f} at the end; `demos/bench_splat_layers.py {' '.join(args.scenes)} --size {args.size}`. "
-        f"Texture {args.resolution}^3, K = {args.directions}, disc splats, quality \"high\"; truth "
+        f"Texture {args.resolution}^3, K = {args.directions}, the corpus bench's points and {BASELINE['splat']} "
+        "splats, quality \"high\"; truth "
         f"{args.gt_ssaa}x{args.gt_ssaa} polygons; PSNR (dB) / FLIP inside the object's box, as the corpus bench. "
         "before: an equal-weight last layer and a least span of 1 slice; weights, span: one rule each; both: "
         "the defaults. Δ: both - before. ≥ 2x2: both at least as good as 2x2 polygons in PSNR and FLIP.",
