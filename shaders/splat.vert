@@ -5,7 +5,9 @@
 // In (one vertex per point, positions relative to the cloud's local origin):
 //   in_position (local frame), in_normal (world orientation; its length is
 //   the point's coherence, see lighting.glsl),
-//   in_size = sqrt(area) (world units), in_kd (RGB), in_spec = (ks, shininess).
+//   in_size = sqrt(area) (world units), negated for a one-sided point (a
+//   piece of a closed surface, its normal pointing out: culled where it faces
+//   away from the eye), in_kd (RGB), in_spec = (ks, shininess).
 // Out: SplatData (splat_data.glsl; all flat), and
 //   SPRITE path (default): gl_Position at the box centre and a gl_PointSize
 //   covering the box; splats whose box is wider than u_max_sprite, or with
@@ -67,6 +69,7 @@ uniform vec2 u_depth;        // (K, delta): window depth = K (t - near) / t, del
 uniform vec2 u_extent;       // shape half-axes per unit of in_size
 uniform float u_max_sprite;  // widest point sprite the sprite path may draw, pixels
 uniform float u_push;        // visibility push-back, in units of the larger half-axis
+uniform bool u_one_sided;    // cull one-sided points seen from behind (the eye is outside the cloud)
 #ifdef AA
 #include "splat_filter.glsl"
 uniform float u_size_factor; // the shape's linear scale over its true area's
@@ -153,7 +156,7 @@ void main() {
     vec3 helper = abs(n.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0);
     vec3 t = normalize(cross(n, helper));
     vec3 b = cross(n, t);
-    vec2 h = u_extent * in_size;
+    vec2 h = u_extent * abs(in_size);
     vec3 tu = t / max(h.x, 1e-30);
     vec3 tv = b / max(h.y, 1e-30);
 
@@ -163,6 +166,10 @@ void main() {
     vec3 nd = n * u_ray;  // (n.f, n.R, n.U): w'
     vec3 nc = vec3(dot(n, g), dot(n, rt), dot(n, ut));
     float num = u_t0 * nd.x - nc.x;  // n . (p - e)
+    if (u_one_sided && in_size < 0.0 && num > 0.0) {  // a one-sided point seen from behind
+        cull();
+        return;
+    }
     float s = num < 0.0 ? -1.0 : 1.0;
     vs_out.hu = s * bilinear(vec3(dot(tu, g), dot(tu, rt), dot(tu, ut)), nd, nc, tu * u_ray);
     vs_out.hv = s * bilinear(vec3(dot(tv, g), dot(tv, rt), dot(tv, ut)), nd, nc, tv * u_ray);

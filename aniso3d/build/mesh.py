@@ -119,16 +119,21 @@ class Mesh:
         return float(self.face_areas().sum())
 
     def closed_faces(self) -> np.ndarray:
-        """(F,) bool: faces whose three edges are each shared with exactly one
-        other face, walked the other way (vertices matched by position).
+        """(F,) bool: faces of closed surfaces, components of faces whose
+        edges are each shared with exactly one other face, walked the other
+        way (vertices matched by position): a solid's watertight skin.
 
-        Such faces lie on a closed, consistently wound surface, locally: a
-        solid's skin. Where its front and back fall into one voxel (a thin
-        beam, a branch, a wall under a voxel thick) the back lies behind the
-        front, and the texture counts it once (:mod:`aniso3d.build.stream`).
-        Open sheets (leaves, blades, strips) have boundary edges and keep
-        every side. See :func:`closed_faces`."""
+        Where its front and back fall into one voxel (a thin beam, a wall
+        under a voxel thick) the back lies behind the front, and the texture
+        counts it once (:mod:`aniso3d.build.stream`); its points face one way
+        (their backs are hidden). Open surfaces (leaves, blades, a sheet, a
+        tube open at its ends) keep every side. See :func:`closed_sides`."""
         return closed_faces(self.vertices, self.faces)
+
+    def closed_sides(self) -> np.ndarray:
+        """(F,) int8: :func:`closed_sides`, +1 or -1 (outward or inward
+        winding) on closed surfaces, 0 elsewhere."""
+        return closed_sides(self.vertices, self.faces)
 
     @property
     def nbytes(self) -> int:
@@ -425,12 +430,26 @@ def _sample_texture(image, uv: np.ndarray) -> np.ndarray:
 
 def closed_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(F,) bool: :meth:`Mesh.closed_faces` of ``vertices`` (V, 3) and
-    ``faces`` (F, 3). Degenerate faces (a repeated corner) are not closed."""
+    ``faces`` (F, 3): the faces of :func:`closed_sides` that are not 0."""
+    return closed_sides(vertices, faces) != 0
+
+
+def closed_sides(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F,) int8: +1 for a face of a closed surface wound outwards, -1 for
+    one wound inwards, 0 for a face of an open surface.
+
+    A closed surface is a component of faces joined by shared edges
+    (vertices matched by position) in which every edge is shared by exactly
+    two faces walking it opposite ways: a watertight, consistently wound
+    skin. Its orientation is the sign of its signed volume. Degenerate faces
+    (a repeated corner) and components enclosing no volume are open."""
     faces = np.asarray(faces, dtype=np.int64)
-    if len(faces) == 0:
-        return np.zeros(0, dtype=bool)
+    nf = len(faces)
+    if nf == 0:
+        return np.zeros(0, dtype=np.int8)
+    v = np.asarray(vertices, dtype=np.float64)
     # Vertices at the same position are one (meshes split them along seams).
-    _, same = np.unique(np.asarray(vertices, dtype=np.float64), axis=0, return_inverse=True)
+    _, same = np.unique(v, axis=0, return_inverse=True)
     f = same.reshape(-1)[faces]
     a = f.reshape(-1)
     b = f[:, [1, 2, 0]].reshape(-1)
@@ -442,4 +461,39 @@ def closed_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     walk = np.bincount(inverse, weights=np.where(a < b, 1.0, -1.0), minlength=len(count))
     good = (count == 2) & (walk == 0)
     edge_ok = good[inverse] & (a != b)
-    return edge_ok.reshape(-1, 3).all(axis=1)
+    local = edge_ok.reshape(-1, 3).all(axis=1)
+    # Components: faces joined by edges that two faces share.
+    order = np.argsort(inverse, kind="stable")
+    first = np.concatenate([[0], np.cumsum(count)[:-1]])
+    pair = first[count == 2]
+    u, w = order[pair] // 3, order[pair + 1] // 3
+    root = connected_components(nf, u, w)
+    # A component is closed when every face of it is.
+    open_count = np.bincount(root, weights=(~local).astype(np.float64), minlength=nf)
+    p0, p1, p2 = (v[faces[:, k]] - v.mean(axis=0) for k in range(3))
+    volume = np.bincount(root, weights=np.einsum("ij,ij->i", p0, np.cross(p1, p2)), minlength=nf)
+    extent = float(np.ptp(v, axis=0).max()) if len(v) else 0.0
+    tiny = 1e-12 * extent**3
+    sign = np.where(volume > tiny, 1, np.where(volume < -tiny, -1, 0))
+    return np.where(open_count[root] == 0, sign[root], 0).astype(np.int8)
+
+
+def connected_components(n: int, u: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """(n,) int64: a label per node of the graph of ``n`` nodes and edges
+    ``u[i] - w[i]``, the smallest node of its component (hooking each root
+    onto the smaller of two joined roots, then pointer jumping, until no
+    edge joins two roots: a few rounds, no loop over nodes or edges)."""
+    parent = np.arange(n, dtype=np.int64)
+    u, w = np.asarray(u, dtype=np.int64), np.asarray(w, dtype=np.int64)
+    while True:
+        ru, rw = parent[u], parent[w]
+        keep = ru != rw
+        if not keep.any():
+            return parent
+        lo, hi = np.minimum(ru[keep], rw[keep]), np.maximum(ru[keep], rw[keep])
+        np.minimum.at(parent, hi, lo)
+        while True:
+            jumped = parent[parent]
+            if np.array_equal(jumped, parent):
+                break
+            parent = jumped

@@ -38,7 +38,7 @@ from aniso3d.build.mesh import (
     MAX_SHININESS,
     Mesh,
     check_readable_file,
-    closed_faces,
+    closed_sides,
     load_mesh,
 )
 from aniso3d.build.stream import TriangleChunk
@@ -75,12 +75,13 @@ class TriangleSource:
     n_vertices: int = 0
     portable: bool = False
     note: str = ""
-    #: (n_faces,) bool once :meth:`find_closed` found them, else None.
+    #: (n_faces,) int8 once :meth:`find_closed` found them, else None: +1 or -1
+    #: on closed surfaces (outward or inward winding), 0 elsewhere.
     closed: np.ndarray | None = None
 
     def find_closed(self, memory_budget: int | None = None) -> bool:
         """Find which faces lie on a closed surface
-        (:func:`~aniso3d.build.mesh.closed_faces`, vertices matched by
+        (:func:`~aniso3d.build.mesh.closed_sides`, vertices matched by
         position), reading every triangle once, unless that would take more
         than ``memory_budget`` bytes (about :data:`CLOSED_BYTES_PER_FACE` a
         face): then none is taken as closed. True if found."""
@@ -90,7 +91,7 @@ class TriangleSource:
             return False
         tri = [self.read(a, min(self.n_faces, a + READ_FACES)).triangles for a in range(0, self.n_faces, READ_FACES)]
         tri = np.concatenate(tri) if tri else np.zeros((0, 3, 3))
-        self.closed = closed_faces(tri.reshape(-1, 3), np.arange(3 * len(tri)).reshape(-1, 3))
+        self.closed = closed_sides(tri.reshape(-1, 3), np.arange(3 * len(tri)).reshape(-1, 3))
         return True
 
     def bounds(self) -> np.ndarray:
@@ -138,7 +139,7 @@ class MeshSource(TriangleSource):
 
     def find_closed(self, memory_budget: int | None = None) -> bool:
         if self.closed is None:
-            self.closed = self.mesh.closed_faces()  # the mesh is in memory already
+            self.closed = self.mesh.closed_sides()  # the mesh is in memory already
         return True
 
 

@@ -46,6 +46,11 @@ class PointCloud:
             None gives 1 everywhere, as for a scanned cloud); the lighting
             model shades the normals' spread from it
             (:func:`~aniso3d.rendering.lighting.shade_np`).
+        one_sided: (N,) bool, the point stands for a piece of a closed
+            surface and its normal points out of it, so its back is never
+            seen: the renderers drop it where it faces away from the eye
+            (at a silhouette it would cover the pixels the front covers
+            again). None: every point two-sided, as for a scanned cloud.
     """
 
     positions: np.ndarray
@@ -56,6 +61,7 @@ class PointCloud:
     shininess: np.ndarray
     name: str = "points"
     coherence: np.ndarray | None = None
+    one_sided: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         p = np.ascontiguousarray(self.positions, dtype=np.float64)
@@ -91,6 +97,11 @@ class PointCloud:
             if n and not np.isfinite(coh).all():
                 raise InputError("point coherence holds NaN or Inf values")
         object.__setattr__(self, "coherence", np.clip(coh, 0.0, 1.0))
+        if self.one_sided is not None:
+            one = np.asarray(self.one_sided)
+            if one.shape != (n,) or one.dtype != bool:
+                raise InputError(f"point one_sided must be a ({n},) bool array, got {one.dtype} {one.shape}")
+            object.__setattr__(self, "one_sided", None if not one.any() else one.copy())
         object.__setattr__(self, "positions", p)
         object.__setattr__(self, "normals", nrm.astype(np.float32))
         object.__setattr__(self, "areas", areas)

@@ -31,7 +31,14 @@ import numpy as np
 
 from aniso3d.build.closure import hidden_density, hidden_sides
 from aniso3d.build.points import PointCloud
-from aniso3d.build.texture import PLACEMENTS, POINT_NORMALS, AnisoTexture, entry_coherence, entry_points
+from aniso3d.build.texture import (
+    PLACEMENTS,
+    POINT_NORMALS,
+    AnisoTexture,
+    entry_coherence,
+    entry_one_sided,
+    entry_points,
+)
 from aniso3d.errors import InputError
 from aniso3d.grid import cell_coords, cell_keys, weighted_means
 
@@ -116,7 +123,8 @@ class Pyramid(list):
             pe = self.adaptive_counts(level) if per_entry == "adaptive" else per_entry
             arrays = entry_points(tex, None, placement, pe, normal)
             cloud = PointCloud(*arrays, name=str(tex.meta.get("source", "points")),
-                               coherence=entry_coherence(tex, None, pe))  # fmt: skip
+                               coherence=entry_coherence(tex, None, pe),
+                               one_sided=entry_one_sided(tex, None, pe, normal))  # fmt: skip
             eoff = np.asarray(tex.entry_offsets, dtype=np.int64)
             if np.ndim(pe) == 0:
                 offsets = eoff * int(pe)

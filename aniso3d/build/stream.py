@@ -71,7 +71,7 @@ from aniso3d.grid import cell_coords, cell_keys
 FRAC_BITS = 84
 #: Summed columns of a shading entry: S, S (c - cell) (3), S k_d (3), S k_s,
 #: S n, S N (3), and of its pieces on closed surfaces (TriangleChunk.closed)
-#: S and S N (3).
+#: S and S N (3), N turned outwards.
 ENTRY_COLUMNS = 16
 #: The Phong exponent is summed as ``S n 2^-14`` (exact scaling), so that
 #: every summed value of a piece inside the grid is small (SMALL_VALUE).
@@ -218,9 +218,10 @@ class TriangleChunk:
         kd: (n, 3) float32 diffuse reflectance.
         ks: (n,) float32 specular coefficient.
         shininess: (n,) float32 Phong exponent.
-        closed: (n,) bool, the face lies on a closed surface
-            (:meth:`~aniso3d.build.mesh.Mesh.closed_faces`); None: none does
-            (readers that stream a file never see its topology whole).
+        closed: (n,) +1 or -1 where the face lies on a closed surface wound
+            outwards or inwards, 0 elsewhere (:meth:`~aniso3d.build.mesh.Mesh.closed_sides`;
+            a bool array: wound outwards); None: none does (readers that
+            stream a file never see its topology whole).
     """
 
     triangles: np.ndarray
@@ -395,11 +396,12 @@ def chunk_partial(
     report(0.9, "register")
     # Per triangle: k_d, k_s, n (scaled by 2^-14, exactly, so that every
     # summed value is small) and the normal: one gather per piece.
-    closed = np.zeros(n) if chunk.closed is None else np.asarray(chunk.closed, dtype=np.float64)
+    # The closed columns: the face's area, and its normal turned outwards.
+    side = np.zeros(n) if chunk.closed is None else np.asarray(chunk.closed, dtype=np.float64)
     per_face = np.concatenate([chunk.kd, chunk.ks[:, None], chunk.shininess[:, None] * np.float32(SHININESS_SCALE),
-                               normals, closed[:, None], closed[:, None] * normals],
+                               normals, np.abs(side)[:, None], side[:, None] * normals],
                               axis=1, dtype=np.float64)  # fmt: skip
-    del closed
+    del side
 
     def entry(r0: int, r1: int) -> np.ndarray:
         idx = order[r0:r1]

@@ -275,7 +275,8 @@ class AnisoTexture:
         """
         arrays = entry_points(self, None, placement, per_entry, normal)
         return PointCloud(*arrays, name=str(self.meta.get("source", "points")),
-                          coherence=entry_coherence(self, None, per_entry))  # fmt: skip
+                          coherence=entry_coherence(self, None, per_entry),
+                          one_sided=entry_one_sided(self, None, per_entry, normal))  # fmt: skip
 
     # ------------------------------------------------------------------ I/O
 
@@ -350,22 +351,19 @@ def entry_points(
         voxels = np.asarray(voxels, dtype=np.int64)
     h = float(t.voxel_size)
     sample_n = t.directions[t.entry_direction[ent]]
-    if normal == "mean":
-        mean = t.entry_normal[ent].astype(np.float64)
-        length = np.linalg.norm(mean, axis=1)
-        # Facets that cancel (a two-sided sheet registered both ways) have no
-        # mean direction; the sample direction is the honest fallback.
-        nrm = np.where((length > 1e-6)[:, None], mean / np.maximum(length, 1e-300)[:, None], sample_n)
-    else:
-        nrm = sample_n
+    nrm = _entry_normals(t, ent, normal)
     if placement == "centroid":
         pos = t.entry_centroid[ent].astype(np.float64)
     else:
         vox = t.entry_voxel if voxels is None else np.repeat(voxels, off[voxels + 1] - off[voxels])
         centre = np.asarray(t.origin, np.float64) + (np.asarray(t.coords, np.float64)[vox] + 0.5) * h
         pos = centre if placement == "center" else centre + 0.5 * h * sample_n
-    # What the entry covers: the back of a thin solid is not drawn twice.
-    area = t.entry_area[ent] * t.entry_cover[ent] * h * h
+    # What the entry covers: the back of a thin solid is not drawn twice. A
+    # one-sided entry's back is culled instead, so it keeps all its area;
+    # its normal points out of its solid.
+    side = entry_sides(t, ent, nrm)
+    nrm = np.where((side < 0)[:, None], -nrm, nrm)
+    area = t.entry_area[ent] * np.where(side != 0, 1.0, t.entry_cover[ent]) * h * h
     kd, ks, sh = t.entry_kd[ent], t.entry_ks[ent], t.entry_shininess[ent]
     counts = _point_counts(t, ent, len(area), per_entry)
     if counts is None:
@@ -374,6 +372,45 @@ def entry_points(
     rep = lambda a: np.repeat(a, counts, axis=0)  # noqa: E731
     m = rep(counts).astype(np.float64)
     return rep(pos) + _spread(nrm, area, counts, h), rep(nrm), rep(area) / m, rep(kd), rep(ks), rep(sh)
+
+
+def _entry_normals(t: AnisoTexture, ent: slice | np.ndarray, normal: str) -> np.ndarray:
+    """(E,) unit normals of the entries ``ent`` as their points get them."""
+    sample_n = t.directions[t.entry_direction[ent]]
+    if normal != "mean":
+        return sample_n
+    mean = t.entry_normal[ent].astype(np.float64)
+    length = np.linalg.norm(mean, axis=1)
+    # Facets that cancel (a two-sided sheet registered both ways) have no
+    # mean direction; the sample direction is the honest fallback.
+    return np.where((length > 1e-6)[:, None], mean / np.maximum(length, 1e-300)[:, None], sample_n)
+
+
+def entry_sides(t: AnisoTexture, ent: slice | np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """(E,) int8 for the entries ``ent``: +1 or -1 where every piece of the
+    entry lies on a closed surface (:meth:`~aniso3d.build.mesh.Mesh.closed_sides`)
+    and ``normals`` point out of it or into it, 0 elsewhere, and for every
+    entry of a texture loaded from a file (which keeps no closed sums)."""
+    if t.entry_closed_area is None:
+        return np.zeros(len(normals), dtype=np.int8)
+    area = np.asarray(t.entry_area, dtype=np.float64)[ent]
+    closed = np.asarray(t.entry_closed_area, dtype=np.float64)[ent]
+    outward = np.einsum("ij,ij->i", normals, np.asarray(t.entry_closed_normal, dtype=np.float64)[ent])
+    whole = (area > 0) & (closed >= (1.0 - 1e-9) * area)
+    return np.where(whole, np.sign(outward), 0).astype(np.int8)
+
+
+def entry_one_sided(
+    texture: AnisoTexture, voxels: np.ndarray | None = None, per_entry: int | np.ndarray = 1, normal: str = "mean"
+) -> np.ndarray:
+    """(P,) bool: which points :func:`entry_points` makes with the same
+    arguments are one-sided (:attr:`~aniso3d.build.points.PointCloud.one_sided`),
+    in the same order."""
+    ent = _entry_selection(texture, voxels)
+    t = texture
+    one = entry_sides(t, ent, _entry_normals(t, ent, normal)) != 0
+    counts = _point_counts(t, ent, len(one), per_entry)
+    return one if counts is None else np.repeat(one, counts)
 
 
 def entry_coherence(

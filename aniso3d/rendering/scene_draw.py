@@ -317,7 +317,8 @@ def _draw_splat(impl, up: SceneUpload, view: FrameView, fbo, opts) -> DrawStats:
         block_size=np.array([max(float(h.level_size.max()) for h in up.handles)]),
         typical_size=float(np.median([h.typical_size for h in up.handles])),
     )  # fmt: skip
-    uniforms = pipe.uniforms(proxy, view, opts)
+    # Instances may be mirrored, and the eye may stand among them: no culling.
+    uniforms = pipe.uniforms(proxy, view, opts, one_sided=False)
     ctx = impl.gl.ctx
     target = fbo if fbo is not None else ctx.fbo
     viewport = ctx.viewport

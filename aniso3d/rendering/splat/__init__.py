@@ -55,7 +55,8 @@ from aniso3d.rendering.splat.renderer import SplatRenderer
 
 __all__ = [
     "AA_CLOSE", "AA_DTYPE", "AA_FILTER", "AA_LAYERS", "AA_PLANE_REACH", "AA_REGIME", "AA_SHADE_BOX", "AA_SLICES",
-    "AA_SPAN", "AA_SPAN_MIN", "ACCUM_DTYPE", "ATTRIB_PER_ROW", "BLOCK", "DEFAULT_ASPECT", "DEFAULT_PUSH", "FLOATS_PER_POINT",
+    "AA_SPAN", "AA_SPAN_MIN", "ACCUM_DTYPE", "ATTRIB_PER_ROW", "BLOCK", "DEFAULT_ASPECT", "DEFAULT_PUSH",
+    "FLOATS_PER_POINT",
     "GPULodPoints", "GPUPoints", "QUALITIES", "SHAPES", "SQUARE_SIZE_FACTOR", "SplatOptions",
     "SplatRenderer", "default_size_factor", "morton_order", "shape_extent", "splat_coverage_np",
     "tangent_frame",

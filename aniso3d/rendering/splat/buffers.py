@@ -112,7 +112,7 @@ def upload_points(gl: GLContext, cloud: PointCloud | LodPoints) -> GPUPoints:
     origin = 0.5 * (bounds[0] + bounds[1])
     order = morton_order(cloud.positions - origin)
     arrays = (cloud.positions, uploaded_normals(cloud), cloud.areas, cloud.kd, cloud.ks, cloud.shininess)
-    return _upload_arrays(gl, GPUPoints, arrays, order, bounds, origin)
+    return _upload_arrays(gl, GPUPoints, arrays, order, bounds, origin, one_sided=cloud.one_sided)
 
 
 #: Least coherence uploaded: the normal's length carries it, and the splat's
@@ -128,9 +128,11 @@ def uploaded_normals(cloud: PointCloud) -> np.ndarray:
     return cloud.normals * np.maximum(cloud.coherence, MIN_COHERENCE)[:, None]
 
 
-def _upload_arrays(gl: GLContext, cls, arrays, order, bounds, origin, **extra) -> GPUPoints:
+def _upload_arrays(gl: GLContext, cls, arrays, order, bounds, origin, one_sided=None, **extra) -> GPUPoints:
     """Upload the points ``order`` of ``arrays`` (positions, normals,
-    areas, kd, ks, shininess), in that order, relative to ``origin``."""
+    areas, kd, ks, shininess), in that order, relative to ``origin``; a
+    ``one_sided`` point (:attr:`~aniso3d.build.points.PointCloud.one_sided`)
+    gets its size negated (splat.vert culls it where it faces away)."""
     positions, normals, areas, kd, ks, shininess = arrays
     n = len(order)
     rows = -(-n // ATTRIB_PER_ROW)
@@ -144,7 +146,7 @@ def _upload_arrays(gl: GLContext, cls, arrays, order, bounds, origin, **extra) -
     data = np.empty((n, FLOATS_PER_POINT), dtype=np.float32)
     data[:, 0:3] = local
     data[:, 3:6] = normals[order]
-    data[:, 6] = size
+    data[:, 6] = size if one_sided is None else np.where(one_sided[order], -size, size)
     data[:, 7:10] = kd[order]
     data[:, 10] = ks[order]
     data[:, 11] = shininess[order]
@@ -212,9 +214,12 @@ def upload_lod(gl: GLContext, lod: LodPoints) -> GPULodPoints:
         np.concatenate([uploaded_normals(c) if name == "normals" else getattr(c, name) for c in clouds])
         for name in ("positions", "normals", "areas", "kd", "ks", "shininess")
     )
+    one_sided = None
+    if any(c.one_sided is not None for c in clouds):
+        one_sided = np.concatenate([np.zeros(len(c), bool) if c.one_sided is None else c.one_sided for c in clouds])
     empty = np.full((2, 3), np.nan)
     handle = _upload_arrays(
-        gl, GPULodPoints, arrays, np.concatenate(parts), bounds, origin,
+        gl, GPULodPoints, arrays, np.concatenate(parts), bounds, origin, one_sided=one_sided,
         lod=lod, level_first=np.asarray(level_first, dtype=np.int64),
         rank=rank, run_first=run_first, run_count=run_count,
         level_bounds=np.stack([c.bounds if len(c) else empty for c in clouds]),

@@ -11,8 +11,8 @@ import numpy as np
 
 from aniso3d.grid import tangent_frame
 from aniso3d.rendering.frame import FrameView
-from aniso3d.rendering.splat.options import DEFAULT_ASPECT, SplatOptions, default_size_factor, shape_extent
 from aniso3d.rendering.splat import params
+from aniso3d.rendering.splat.options import DEFAULT_ASPECT, SplatOptions, default_size_factor, shape_extent
 from aniso3d.rendering.splat.params import AA_SLICES, AA_SPAN
 
 

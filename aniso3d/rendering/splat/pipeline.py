@@ -24,9 +24,9 @@ import numpy as np
 from aniso3d.errors import ResourceError
 from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.frame import FrameView
+from aniso3d.rendering.splat import params
 from aniso3d.rendering.splat.buffers import ATTRIBUTES, GPULodPoints, GPUPoints
 from aniso3d.rendering.splat.culling import depth_range, large_blocks
-from aniso3d.rendering.splat import params
 from aniso3d.rendering.splat.geometry import mask_slicing
 from aniso3d.rendering.splat.options import SplatOptions
 from aniso3d.rendering.splat.params import (
@@ -80,6 +80,15 @@ class Targets:
 def reach(opts: SplatOptions) -> float | None:
     """The pixel filter's reach of a coverage-aware pass, None for the others."""
     return filter_radius() if opts.quality == "high" else None
+
+
+def outside(point, bounds: np.ndarray) -> bool:
+    """True if ``point`` lies outside the box ``bounds`` (2, 3) grown by a
+    millionth of its diagonal."""
+    b = np.asarray(bounds, dtype=np.float64)
+    grow = 1e-6 * float(np.linalg.norm(b[1] - b[0]))
+    p = np.asarray(point, dtype=np.float64)
+    return bool(np.any(p < b[0] - grow) or np.any(p > b[1] + grow))
 
 
 class SplatPipeline:
@@ -176,8 +185,14 @@ class SplatPipeline:
 
     # -------------------------------------------------------------- frames
 
-    def uniforms(self, handle: GPUPoints, view: FrameView, opts: SplatOptions) -> dict[str, object]:
-        """Every uniform a pass may need for this frame and upload."""
+    def uniforms(
+        self, handle: GPUPoints, view: FrameView, opts: SplatOptions, one_sided: bool = True
+    ) -> dict[str, object]:
+        """Every uniform a pass may need for this frame and upload.
+        ``one_sided``: cull one-sided points seen from behind
+        (:attr:`~aniso3d.build.points.PointCloud.one_sided`), which holds
+        only while the eye is outside the cloud's bounds (inside a closed
+        surface its back is what the eye sees)."""
         cam = view.camera
         r, u, f = cam.basis()
         tan = math.tan(math.radians(cam.fov) / 2)
@@ -211,6 +226,7 @@ class SplatPipeline:
             "u_slices": (lo, scale),
             "u_span": span,
             "u_background": tuple(float(x) for x in view.lighting.background),
+            "u_one_sided": int(one_sided and outside(view.camera.position, handle.bounds)),
             **view.lighting.uniforms(),
         }
 

@@ -57,6 +57,7 @@ from aniso3d.rendering.splat import params
 from aniso3d.rendering.splat.geometry import mask_slicing
 from aniso3d.rendering.splat.options import SplatOptions
 from aniso3d.rendering.splat.params import AA_CLOSE, AA_FILTER, AA_LAYERS, AA_PLANE_REACH, AA_REGIME, AA_SLICES
+from aniso3d.rendering.splat.pipeline import outside
 
 #: Fragments covering less of their pixel than this are dropped (splat.frag).
 MIN_COVERAGE = 1e-4
@@ -121,6 +122,12 @@ def subpixel_fragments_np(cloud: PointCloud, view: FrameView, opts: SplatOptions
     proj = np.array([1.0 / (tan * view.aspect), 1.0 / tan])
     near, far = float(view.near), float(view.far)
     eye = np.asarray(cam.position, np.float64)
+    if cloud.one_sided is not None and outside(eye, cloud.bounds):
+        # One-sided points seen from behind are culled (splat.vert).
+        behind = cloud.one_sided & (np.einsum("ij,ij->i", cloud.normals.astype(np.float64), cloud.positions - eye) > 0)
+        keep = ~behind
+        cloud = PointCloud(cloud.positions[keep], cloud.normals[keep], cloud.areas[keep], cloud.kd[keep],
+                           cloud.ks[keep], cloud.shininess[keep], coherence=cloud.coherence[keep])  # fmt: skip
     p = cloud.positions - eye
     n = cloud.normals
     t_ax, b_ax = tangent_frame(n)
