@@ -122,6 +122,7 @@ def subpixel_fragments_np(cloud: PointCloud, view: FrameView, opts: SplatOptions
     proj = np.array([1.0 / (tan * view.aspect), 1.0 / tan])
     near, far = float(view.near), float(view.far)
     eye = np.asarray(cam.position, np.float64)
+    full = cloud  # the slices span the whole cloud's depths, culled points included (as uploaded)
     if cloud.one_sided is not None and outside(eye, cloud.bounds):
         # One-sided points seen from behind are culled (splat.vert).
         behind = cloud.one_sided & (np.einsum("ij,ij->i", cloud.normals.astype(np.float64), cloud.positions - eye) > 0)
@@ -187,10 +188,12 @@ def subpixel_fragments_np(cloud: PointCloud, view: FrameView, opts: SplatOptions
     rgb = np.clip(shade_np(n, view_dir, cloud.kd, cloud.ks, cloud.shininess, view.lighting, cloud.coherence), 0.0, 1.0)
     # The slices span the view depths the cloud's splats may reach
     # (culling.depth_range: the bounds grown by the largest splat).
-    b = cloud.bounds + np.array([[-1.0], [1.0]]) * float(size.max()) * math.hypot(*opts.extent)
+    full_size = np.sqrt(full.areas)
+    b = full.bounds + np.array([[-1.0], [1.0]]) * float(full_size.max()) * math.hypot(*opts.extent)
     corners = np.array([[x_, y_, z_] for x_ in b[:, 0] for y_ in b[:, 1] for z_ in b[:, 2]])
     corner_depth = (corners - eye) @ f
-    slicing = mask_slicing(view, float(corner_depth.min()), float(corner_depth.max()), float(np.median(size)), opts)
+    slicing = mask_slicing(view, float(corner_depth.min()), float(corner_depth.max()), float(np.median(full_size)),
+                           opts)  # fmt: skip
     pixel = (h - 1 - iy) * w + ix
     return Fragments(pixel, cov, z, rgb[splat], (w, h), slicing)
 
