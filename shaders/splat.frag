@@ -49,11 +49,11 @@
 // surfaces by depth (aniso3d/rendering/splat/reference.py, the NumPy twin,
 // states the rule):
 //   PASS 1 writes the pushed depth z + push (the visible depth, kept for
-//     compositing with other draws), sets the bit of z's slice in the
-//     pixel's occupancy mask u_mask (SLICES slices over the cloud's depths,
-//     u_slices) by atomic OR, and adds c to the pixel's coverage sum (the
-//     mask's last word, fixed point, COVER_SCALE a unit); splat_surfaces.frag
-//     then finds where the pixel's surfaces start (u_surfaces);
+//     compositing with other draws; the least by a MIN blend) and c (summed
+//     by an additive blend: the pixel's coverage sum), and sets the bit of
+//     z's slice in the pixel's occupancy mask u_mask (SLICES slices over the
+//     cloud's depths, u_slices) by atomic OR; splat_surfaces.frag then finds
+//     where the pixel's surfaces start (u_surfaces);
 //   PASS 2 adds (RGB c, c) to the layer of the fragment's surface: layer k
 //     holds the k-th surface from the front, the last (LAYERS - 1) every
 //     surface from there on, where a fragment of the layer's j-th surface
@@ -82,9 +82,6 @@
 #ifndef LAST_WEIGHTS  // aniso3d/rendering/splat/params.py (AA_LAST_WEIGHTS)
 #define LAST_WEIGHTS 1
 #endif
-// Coverage sums in fixed point: this many units a whole pixel (2^16 pixels'
-// worth fit in 32 bits: far more surfaces than a pixel holds).
-#define COVER_SCALE 65536.0
 #endif
 
 #ifndef PASS
@@ -101,8 +98,7 @@ uniform vec2 u_depth;   // (K, t0 - near): window depth = K (t - near) / t
 uniform float u_range;  // far - near
 uniform vec2 u_slices;  // (lo, scale): slice coordinate (z - lo) scale of a linear depth z
 #if PASS == 1
-// SLICES / 32 words per pixel, then the coverage sum.
-layout(r32ui) uniform uimage2DArray u_mask;
+layout(r32ui) uniform uimage2DArray u_mask;  // SLICES / 32 words per pixel
 #endif
 #endif
 #if PASS == 0 && defined(FORWARD)
@@ -138,6 +134,8 @@ in SplatData SPLAT_DATA fs_in;
 out vec4 f_color;
 #elif PASS == 0
 out uint f_id;
+#elif PASS == 1 && defined(AA)
+out vec4 f_visible;  // (pushed depth, 0, 0, c): blended MIN in RGB, added in alpha
 #elif PASS == 2 && defined(AA)
 layout(location = 0) out vec4 f_layer[LAYERS];  // (RGB c, c) of each layer
 #elif PASS == 2
@@ -191,10 +189,6 @@ void mark(float u) {
     if ((imageLoad(u_mask, at).r & bit) == 0u) imageAtomicOr(u_mask, at, bit);
 }
 
-// Add coverage c to the pixel's sum.
-void add_cover(float c) {
-    imageAtomicAdd(u_mask, ivec3(ivec2(gl_FragCoord.xy), SLICES >> 5), uint(c * COVER_SCALE + 0.5));
-}
 #endif
 #if defined(AA) && PASS == 2
 // This fragment's layer: how many of the surfaces after the first start at or
@@ -280,9 +274,9 @@ void main() {
     float u = slice_of(z);
 #if PASS == 1
     mark(u);
-    add_cover(c);
-    // Below 1, so the surfaces pass (an early depth test) visits every marked pixel.
-    gl_FragDepth = clamp(z + fs_in.pushz, 0.0, 0.99999);
+    // The pushed depth (below 1, so the later passes see every marked pixel),
+    // kept the least by a MIN blend, and c, summed by an additive one.
+    f_visible = vec4(clamp(z + fs_in.pushz, 0.0, 0.99999), 0.0, 0.0, c);
 #elif PASS == 2
     uvec4 surfaces = imageLoad(u_surfaces, ivec2(gl_FragCoord.xy));
     int layer = layer_of(u, surfaces);

@@ -13,9 +13,8 @@
 // each in x, y and z (0xFFFF where there is no such surface; LAYERS <= 7),
 // the first slice of surface 0 (the nearest) in the low half of w, and the
 // number of surfaces in its high half; f_cover, the pixel's coverage sum
-// (the mask's last word, fixed point, COVER_SCALE a unit) and the first
-// slice of its last surface. The mask and the sum are cleared on the way
-// (for the next draw).
+// (u_visible's alpha) and the first slice of its last surface. The mask is
+// cleared on the way (for the next draw).
 #ifndef LAYERS
 #define LAYERS 4
 #endif
@@ -25,13 +24,9 @@
 #if LAYERS > 7
 #error at most 7 layers (their starts and surface 0's share 128 bits)
 #endif
-#define COVER_SCALE 65536.0  // as splat.frag's
-
-// Only pixels something was drawn in (the visibility depth below 1): the
-// depth test runs first (splat_resolve.vert with FAR, depth test GREATER).
-layout(early_fragment_tests) in;
 
 layout(r32ui) uniform uimage2DArray u_mask;
+uniform sampler2D u_visible;  // (pushed depth, 0, 0, coverage sum) of the visibility pass
 uniform float u_span;
 
 layout(location = 0) out uvec4 f_surfaces;
@@ -39,6 +34,8 @@ layout(location = 1) out vec2 f_cover;
 
 void main() {
     ivec2 px = ivec2(gl_FragCoord.xy);
+    vec4 visible = texelFetch(u_visible, px, 0);
+    if (!(visible.r < 1.0)) discard;  // only pixels something was drawn in
     uint starts[8] = uint[8](0xFFFFu, 0xFFFFu, 0xFFFFu, 0xFFFFu, 0xFFFFu, 0xFFFFu, 0xFFFFu, 0xFFFFu);
     uint count = 0u;
     float limit = -1.0;  // the current surface takes the slices below this
@@ -64,9 +61,7 @@ void main() {
             }
         }
     }
-    ivec3 sum_at = ivec3(px, WORDS);
-    f_cover = vec2(float(imageLoad(u_mask, sum_at).r) / COVER_SCALE, float(last));
-    imageStore(u_mask, sum_at, uvec4(0u));
+    f_cover = vec2(visible.a, float(last));
     f_surfaces = uvec4(starts[0] | (starts[1] << 16), starts[2] | (starts[3] << 16),
                    starts[4] | (starts[5] << 16), starts[6] | (min(count, 0xFFFFu) << 16));
 }

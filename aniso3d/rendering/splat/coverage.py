@@ -132,20 +132,21 @@ class HighPass:
         """The shared targets plus the mask, the surfaces and the layers."""
         tg = self.pipe.targets(size)
         words = AA_SLICES // 32
-        if tg.mask is None or tg.mask.layers != words + 1 or len(tg.layers) != AA_LAYERS:
+        if tg.mask is None or tg.mask.layers != words or len(tg.layers) != AA_LAYERS:
             gl = self.pipe.gl
-            gl.free(tg.layered, tg.surfaces_fbo, tg.mask, tg.surfaces, tg.cover, *tg.layers)
+            gl.free(tg.layered, tg.surfaces_fbo, tg.nearest_fbo, tg.mask, tg.nearest, tg.surfaces, tg.cover,
+                    *tg.layers)  # fmt: skip
             # Cleared here; then the surfaces pass clears what each draw set.
-            zeros = np.zeros(size[0] * size[1] * (words + 1), "u4")
-            tg.mask = gl.track(gl.ctx.texture_array((*size, words + 1), 1, zeros, dtype="u4"))
+            zeros = np.zeros(size[0] * size[1] * words, "u4")
+            tg.mask = gl.track(gl.ctx.texture_array((*size, words), 1, zeros, dtype="u4"))
+            tg.nearest = gl.track(gl.ctx.texture(size, 4, dtype="f4"))
             tg.surfaces = gl.track(gl.ctx.texture(size, 4, dtype="u4"))
             tg.cover = gl.track(gl.ctx.texture(size, 2, dtype="f4"))
             tg.layers = tuple(gl.track(gl.ctx.texture(size, 4, dtype=AA_DTYPE)) for _ in range(AA_LAYERS))
-            for tex in (tg.mask, tg.surfaces, tg.cover, *tg.layers):
+            for tex in (tg.mask, tg.nearest, tg.surfaces, tg.cover, *tg.layers):
                 tex.filter = moderngl.NEAREST, moderngl.NEAREST
-            # With the visibility depth: the surfaces pass runs where something was drawn.
-            tg.surfaces_fbo = gl.track(gl.ctx.framebuffer(color_attachments=[tg.surfaces, tg.cover],
-                                                          depth_attachment=tg.depth))  # fmt: skip
+            tg.nearest_fbo = gl.track(gl.ctx.framebuffer(color_attachments=[tg.nearest]))
+            tg.surfaces_fbo = gl.track(gl.ctx.framebuffer(color_attachments=[tg.surfaces, tg.cover]))
             tg.layered = gl.track(gl.ctx.framebuffer(color_attachments=list(tg.layers)))
         return tg
 
@@ -157,25 +158,33 @@ class HighPass:
         (``cleared``: see :meth:`composite`)."""
         pipe = self.pipe
         ctx = pipe.gl.ctx
-        # Visibility: the pushed nearest depth, and the occupancy mask.
-        tg.visibility.use()
-        tg.visibility.clear(depth=1.0)
+        # Visibility: the pushed nearest depth (a MIN blend), the coverage sum
+        # (an additive one; blending costs llvmpipe far less than an image
+        # atomic per fragment) and the occupancy mask.
+        tg.nearest_fbo.use()
+        tg.nearest_fbo.clear(1.0, 0.0, 0.0, 0.0)
+        ctx.disable(moderngl.DEPTH_TEST)
+        ctx.enable(moderngl.BLEND)
+        ctx.blend_equation = (moderngl.MIN, moderngl.FUNC_ADD)
+        ctx.blend_func = moderngl.ONE, moderngl.ONE
         tg.mask.bind_to_image(MASK_UNIT, read=True, write=True)
         try:
             pipe.splats(handle, view, opts, "visibility", {**uniforms, "u_mask": MASK_UNIT})
+            ctx.disable(moderngl.BLEND)
+            ctx.blend_equation = moderngl.FUNC_ADD
             ctx.memory_barrier(moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
             # Surfaces: where each pixel's surfaces start; clears the mask.
             tg.surfaces_fbo.use()
-            tg.surfaces_fbo.depth_mask = False
-            ctx.depth_func = ">"
-            prog, vao = pipe.screen("splat_surfaces.frag", aa=True, far=True)
-            pipe.bind(prog, {"u_mask": MASK_UNIT, "u_span": uniforms["u_span"]})
+            tg.nearest.use(location=0)
+            prog, vao = pipe.screen("splat_surfaces.frag", aa=True)
+            pipe.bind(prog, {"u_mask": MASK_UNIT, "u_span": uniforms["u_span"], "u_visible": 0})
             vao.render(moderngl.TRIANGLES, vertices=3)
         except Exception:
             tg.mask.write(np.zeros(tg.mask.width * tg.mask.height * tg.mask.layers, "u4"))  # no stale bits
             raise
-        ctx.depth_func = "<"
-        ctx.disable(moderngl.DEPTH_TEST)
+        finally:
+            ctx.disable(moderngl.BLEND)
+            ctx.blend_equation = moderngl.FUNC_ADD
         ctx.memory_barrier(moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
         # Accumulation into the layers.
         tg.layered.use()
@@ -188,7 +197,7 @@ class HighPass:
         pipe.splats(handle, view, opts, "accumulate", {**uniforms, "u_surfaces": SURFACES_UNIT, "u_cover": COVER_UNIT})
         ctx.disable(moderngl.BLEND)
         ctx.enable(moderngl.DEPTH_TEST)
-        textures = {"u_visible": tg.depth, "u_surfaces": tg.surfaces, "u_cover": tg.cover}
+        textures = {"u_visible": tg.nearest, "u_surfaces": tg.surfaces, "u_cover": tg.cover}
         for i, tex in enumerate(tg.layers):
             textures[f"u_layer[{i}]"] = tex
         prog, vao = pipe.resolve("splat_aa_resolve.frag", textures, uniforms, target, viewport, aa=True)

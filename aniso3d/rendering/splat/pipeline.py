@@ -47,10 +47,10 @@ class Targets:
     texture (geometry pass of "fast", visibility pass of "high" and "blend")
     and its framebuffer; the point ids (R32UI, "fast"), the accumulation
     texture ("blend") and, for "high", the occupancy ``mask`` (an R32UI array
-    of :data:`~aniso3d.rendering.splat.params.AA_SLICES` / 32 layers and one
-    more for each pixel's coverage sum), the ``surfaces`` texture (RGBA32UI)
-    and the ``cover`` texture (R32F, the coverage sums) and their
-    framebuffer, and the ``layers``
+    of :data:`~aniso3d.rendering.splat.params.AA_SLICES` / 32 layers), the
+    ``nearest`` texture (RGBA32F: each pixel's nearest pushed depth and
+    coverage sum) and its framebuffer, the ``surfaces`` texture (RGBA32UI)
+    and the ``cover`` texture (RG32F) and their framebuffer, and the ``layers``
     (:data:`~aniso3d.rendering.splat.params.AA_LAYERS` RGBA textures) and
     theirs, each made by its pass."""
 
@@ -63,18 +63,21 @@ class Targets:
     mask: moderngl.TextureArray | None = None
     surfaces: moderngl.Texture | None = None
     cover: moderngl.Texture | None = None
+    nearest: moderngl.Texture | None = None
+    nearest_fbo: moderngl.Framebuffer | None = None
     surfaces_fbo: moderngl.Framebuffer | None = None
     layers: tuple = ()
     layered: moderngl.Framebuffer | None = None
 
     def framebuffers(self) -> tuple[moderngl.Framebuffer, ...]:
         """The framebuffers made so far."""
-        fbos = (self.geometry, self.visibility, self.accumulate, self.surfaces_fbo, self.layered)
+        fbos = (self.geometry, self.visibility, self.accumulate, self.nearest_fbo, self.surfaces_fbo, self.layered)
         return tuple(f for f in fbos if f is not None)
 
     def objects(self) -> tuple:
-        return (self.geometry, self.accumulate, self.surfaces_fbo, self.layered, self.visibility, self.ids,
-                self.accum, self.mask, self.surfaces, self.cover, *self.layers, self.depth)  # fmt: skip
+        return (self.geometry, self.accumulate, self.nearest_fbo, self.surfaces_fbo, self.layered, self.visibility,
+                self.ids, self.accum, self.mask, self.nearest, self.surfaces, self.cover, *self.layers,
+                self.depth)  # fmt: skip
 
 
 def reach(opts: SplatOptions) -> float | None:
