@@ -275,8 +275,9 @@ void main() {
 #if PASS == 1
     mark(u);
     // The pushed depth (below 1, so the later passes see every marked pixel),
-    // kept the least by a MIN blend, and c, summed by an additive one.
-    f_visible = vec4(clamp(z + fs_in.pushz, 0.0, 0.99999), 0.0, 0.0, c);
+    // kept the least by a MIN blend, and c, summed by an additive one (twice
+    // for a one-sided splat whose back is culled: the back's share).
+    f_visible = vec4(clamp(z + fs_in.pushz, 0.0, 0.99999), 0.0, 0.0, c * fs_in.sided);
 #elif PASS == 2
     uvec4 surfaces = imageLoad(u_surfaces, ivec2(gl_FragCoord.xy));
     int layer = layer_of(u, surfaces);

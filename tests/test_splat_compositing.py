@@ -448,3 +448,24 @@ def test_a_rough_sheet_stays_one_surface_where_the_span_is_least(r):
     alpha = img[..., 3][inside]
     assert np.all(alpha >= np.minimum(total[inside], 1.0) - TOL)
     assert float(alpha.mean()) > 0.995
+
+
+@pytest.mark.gpu
+def test_a_closed_surface_behind_translucent_sheets_counts_its_culled_back(r):
+    # Five translucent sheets (0.3 of every pixel each) in front of an opaque
+    # sheet of one-sided splats facing the eye: the opaque one lands in the
+    # last layer with two of the translucent ones, whose equal shares would
+    # let 0.7^3 (1 - 1.6/3)^3 = 3.5 % through (a two-sided closed surface's
+    # back used to add its share there). A one-sided splat counts twice in
+    # its pixel's coverage sum: 0.7^3 (1 - 2.6/3)^3 = 0.08 % through.
+    front = [sheet(0.3 - 0.1 * k - 0.003, GREY, area_px=0.075) for k in range(5)]
+    wall = sheet(-0.3 - 0.003, RED)
+    wall = PointCloud(wall.positions, wall.normals, wall.areas, wall.kd, wall.ks, wall.shininess,
+                      one_sided=np.ones(len(wall), bool))  # fmt: skip
+    cloud = merge(*front, wall)
+    cloud = PointCloud(cloud.positions, cloud.normals, cloud.areas, cloud.kd, cloud.ks, cloud.shininess,
+                       one_sided=np.r_[np.zeros(len(cloud) - len(wall), bool), np.ones(len(wall), bool)])  # fmt: skip
+    img = assert_matches_twin(r, cloud)
+    inside = img[20:44, 20:44, 3]
+    want = 1.0 - 0.7**3 * (1.0 - 2.6 / 3.0) ** 3
+    assert np.abs(inside - want).max() < 1e-3, (inside.min(), inside.max(), want)

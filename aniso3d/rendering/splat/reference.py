@@ -29,7 +29,12 @@ fraction of the pixel a splat covers; linear depth z; colour):
    first slice to the first slice of the pixel's last surface, j = (n - 1)
    (slice - first) / (last - first): what the j surfaces in front leave of
    it, had they that coverage each (for equal, evenly spaced surfaces
-   exactly what independent layers give). The nearest surface is whole (a = 1)
+   exactly what independent layers give). Where the last layer holds more
+   than one surface its sum is the pixel's coverage sum less the other
+   layers' sums; in the pixel's coverage sum a one-sided splat drawn with
+   its back culled counts twice (its back's share: a closed surface is
+   opaque, and the equal shares of a last layer would let it leak). The
+   nearest surface is whole (a = 1)
    where the mean of min(1, sum) over the pixel and its four neighbours
    reaches ``mean`` (:data:`~aniso3d.rendering.splat.params.AA_CLOSE`),
    a neighbour counting where its nearest surface starts less than ``reach``
@@ -77,6 +82,9 @@ class Fragments:
         size: (width, height) of the image, pixels.
         slicing: (lo, scale, span) of the draw's depth slices
             (:func:`~aniso3d.rendering.splat.geometry.mask_slicing`).
+        counts: (F,) float64, how many times the fragment's coverage counts
+            in its pixel's coverage sum: 2 for a one-sided splat drawn with
+            its back culled (the back's share), else 1; None: all 1.
     """
 
     pixel: np.ndarray
@@ -85,6 +93,7 @@ class Fragments:
     rgb: np.ndarray
     size: tuple[int, int]
     slicing: tuple[float, float, float]
+    counts: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = len(self.pixel)
@@ -123,10 +132,13 @@ def subpixel_fragments_np(cloud: PointCloud, view: FrameView, opts: SplatOptions
     near, far = float(view.near), float(view.far)
     eye = np.asarray(cam.position, np.float64)
     full = cloud  # the slices span the whole cloud's depths, culled points included (as uploaded)
-    if cloud.one_sided is not None and outside(eye, cloud.bounds):
+    culling = cloud.one_sided is not None and outside(eye, cloud.bounds)
+    counts = np.ones(len(cloud))
+    if culling:
         # One-sided points seen from behind are culled (splat.vert).
         behind = cloud.one_sided & (np.einsum("ij,ij->i", cloud.normals.astype(np.float64), cloud.positions - eye) > 0)
         keep = ~behind
+        counts = np.where(cloud.one_sided, 2.0, 1.0)[keep]
         cloud = PointCloud(cloud.positions[keep], cloud.normals[keep], cloud.areas[keep], cloud.kd[keep],
                            cloud.ks[keep], cloud.shininess[keep], coherence=cloud.coherence[keep])  # fmt: skip
     p = cloud.positions - eye
@@ -195,7 +207,7 @@ def subpixel_fragments_np(cloud: PointCloud, view: FrameView, opts: SplatOptions
     slicing = mask_slicing(view, float(corner_depth.min()), float(corner_depth.max()), float(np.median(full_size)),
                            opts)  # fmt: skip
     pixel = (h - 1 - iy) * w + ix
-    return Fragments(pixel, cov, z, rgb[splat], (w, h), slicing)
+    return Fragments(pixel, cov, z, rgb[splat], (w, h), slicing, counts[splat])
 
 
 def surfaces_np(pixel: np.ndarray, slice_index: np.ndarray, n_pixels: int, span: float):
@@ -258,6 +270,8 @@ def composite_np(
     lo, scale, span = frags.slicing
     keep = frags.coverage >= MIN_COVERAGE
     pixel, c, rgb = frags.pixel[keep], frags.coverage[keep], frags.rgb[keep]
+    counted = c if frags.counts is None else c * np.asarray(frags.counts, dtype=np.float64)[keep]
+    cover_sum = np.bincount(pixel, counted, w * h)
     s = np.clip(np.floor((frags.depth[keep] - lo) * scale), 0, AA_SLICES - 1).astype(np.int64)
     starts, count = surfaces_np(pixel, s, w * h, span)
     surface = (starts[pixel] <= s[:, None]).sum(axis=1) - 1
@@ -268,7 +282,7 @@ def composite_np(
     np.add.at(total, (pixel, layer), c)
     # The last layer's colour: each surface weighted by what the surfaces in
     # front of it leave, at the pixel's mean surface coverage.
-    mean_cover = np.minimum(np.bincount(pixel, c, w * h) / np.maximum(count, 1), 1.0)
+    mean_cover = np.minimum(cover_sum / np.maximum(count, 1), 1.0)
     if layers > 1 and last_weights:
         first = starts[:, layers - 1] if starts.shape[1] >= layers else np.full(w * h, np.inf)
         last_start = np.where(np.isfinite(starts), starts, -np.inf).max(axis=1)
@@ -285,8 +299,12 @@ def composite_np(
     out = np.zeros((w * h, 3))
     trans = np.ones(w * h)
     last = np.maximum(count - (layers - 1), 1).astype(np.float64)
+    front = total[:, : layers - 1].sum(axis=1)
     for k in range(layers):
         a_sum = total[:, k]
+        if k == layers - 1 and layers > 1:
+            # The pixel's coverage sum less the other layers' (what the GPU has).
+            a_sum = np.where(last > 1, np.maximum(cover_sum - front, 0.0), a_sum)
         n = last if k == layers - 1 else np.ones(w * h)
         a = np.where(n > 1, 1.0 - (1.0 - np.minimum(a_sum / n, 1.0)) ** n, np.minimum(a_sum, 1.0))
         if k == 0:
