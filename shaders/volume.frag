@@ -185,6 +185,9 @@ vec3 g_run_ref;    // the unit normal of its first sheet
 float g_run_end;   // ray parameter where its last voxel ends
 vec2 g_run_band;   // share of the footprint crossing its sheets, on each side
 vec2 g_run_hit;    // fills of the sheets the centre ray crosses, on each side
+float g_run_halo;  // the largest share of the footprint its halos carry past an edge
+vec4 g_run_edge;   // band (xy) and hit (zw) on each side of the sheets an open edge
+                   // or silhouette crease cuts: the largest (one edge's faces overlap)
 vec3 g_run_col;    // its sheets' shaded colours, weighted by what they count
 float g_run_w;     // ... the weights' sum
 float g_run_tw;    // ... and the weighted crossing parameter (from o)
@@ -211,10 +214,17 @@ float crossing_fraction(float lo, float hi, float half_w) {
 // run as one layer, its colour and depth those of its sheets each weighted
 // by what it counts times what the run had left uncovered before its voxel
 // (the front-most surface's), and closes it.
-float run_coverage() {
-    float cov = max(g_run_band.x, g_run_band.y);
-    if (g_run_hit.x > 0.0 && !(g_run_hit.y > 0.0)) cov = max(cov, g_run_hit.x);
+float run_sheets() {
+    vec2 band = g_run_band + g_run_edge.xy;
+    vec2 hit = g_run_hit + g_run_edge.zw;
+    float cov = max(band.x, band.y);
+    if (hit.x > 0.0 && !(hit.y > 0.0)) cov = max(cov, hit.x);
     return clamp(cov, 0.0, 1.0);
+}
+
+// ... and with its halos (render/sheet_edges.py): the larger.
+float run_coverage() {
+    return max(run_sheets(), g_run_halo);
 }
 
 void close_run() {
@@ -229,6 +239,49 @@ void close_run() {
     }
     g_color += seg * (g_run_col / g_run_w);
     g_trans -= seg;
+}
+
+// Share of the pixel's footprint (width foot, grid units across the ray) on
+// a sheet's side of its edge on voxel face `face` (2 axis + side) where the
+// ray crosses the sheet's plane at the voxel-local p: sgn +1 for the
+// sheet's own edge (the sheet on the voxel's side of the face), -1 for a
+// halo (the sheet past it). The crossing lies delta from the face along its
+// axis, delta |n.w| / sqrt(1 - n_a^2 - (w x n)_a^2) from the edge seen along
+// the ray: a ramp over the footprint, 1/2 on the edge. Mirrors
+// render/sheet_edges.py:edge_ramp.
+float edge_ramp(uint face, vec3 p, vec3 nh, float nw, float foot, float sgn) {
+    int ax = int(face >> 1u);
+    float delta = (face & 1u) == 1u ? 1.0 - p[ax] : p[ax];
+    float ca = cross(g_d, nh)[ax];
+    float den = sqrt(max(1.0 - nh[ax] * nh[ax] - ca * ca, 1e-12));
+    return clamp(0.5 + sgn * delta * abs(nw) / (den * max(foot, 1e-12)), 0.0, 1.0);
+}
+
+// What a sheet's edge on voxel face `face` leaves of its coverage (x) and
+// its colour's weight (y) where the ray crosses its plane at p: an open
+// edge, or a crease seen as a silhouette (its two half-planes, the sheet's
+// and the partner's at angle phi about the edge, on one side of it on
+// screen), the ramp, save that the halo of the face turned away carries
+// nothing; any other crease (both faces seen, a concave corner) its
+// coverage whole and its colour by the ramp; a halo the ramp (sgn -1).
+// Mirrors render/sheet_edges.py:edge_factors.
+vec2 edge_factors(uint face, bool crease, float phi, vec3 p, vec3 nh, float nw, float foot, float sgn) {
+    float ramp = edge_ramp(face, p, nh, nw, foot, sgn);
+    if (!crease) return vec2(ramp);
+    int ax = int(face >> 1u);
+    vec3 s = vec3(0.0);
+    s[ax] = (face & 1u) == 1u ? -sgn : sgn;
+    vec3 u = normalize(s - dot(s, nh) * nh);
+    vec3 nu = cross(g_d, cross(nh, u));
+    float al = dot(nu, u);
+    float be = dot(nu, nh);
+    bool silhouette = al * (al * cos(phi) + be * sin(phi)) > 0.0;
+    if (sgn < 0.0) return (silhouette && sin(phi) * nw <= 0.0) ? vec2(0.0) : vec2(ramp);
+    return silhouette ? vec2(ramp) : vec2(1.0, ramp);
+}
+
+float edge_angle(uint code) {
+    return float(code) * (6.283185307179586 / 256.0) - 3.141592653589793;
 }
 
 // The 4 samples nearest the line of w (density is even: D(w) = D(-w), so a
@@ -325,10 +378,15 @@ void composite(int v, vec3 x_in, float t0, float chord) {
         sum_a += area;
         if (sheets) {
             uvec4 sh = ENT(3u * e + 2u);
+            // A halo (render/sheet_edges.py) counts in runs only.
+            uint halo_face = (sh.w >> 8u) & 7u;
+            bool halo = halo_face != 7u;
+            if (halo && !(u_opacity_mode == 3 && foot > 0.0)) continue;
             vec2 fill_share = unpackHalf2x16(sh.y);
             float share = 1.0 - (1.0 - fill_share.y) * (1.0 - zoom);
             float fill = share * fill_share.x;
-            float a_s = share * uintBitsToFloat(sh.z);
+            vec2 area_slack = unpackHalf2x16(sh.z);
+            float a_s = share * area_slack.x;
             float len_n = length(n);
             vec3 nh = len_n > 0.0 ? n / len_n : vec3(0.0);
             float nw = dot(nh, g_d);
@@ -341,7 +399,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                 // into many, whatever the angle.
                 float s_in = dot(nh, x_in) - uintBitsToFloat(sh.x);
                 float s_out = s_in + nw * chord;
-                float slack = uintBitsToFloat(sh.w);
+                float slack = area_slack.y;
                 float lo = -max(s_in, s_out) - slack;
                 float hi = -min(s_in, s_out) + slack;
                 bool hit = lo <= 0.0 && hi >= 0.0;
@@ -353,16 +411,32 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                     float half_w = 0.5 * foot * sqrt(max(1.0 - nw * nw, 0.0));
                     // (Without the slack: it only keeps a centre ray from
                     // slipping between neighbouring planes.)
-                    float band = fill * crossing_fraction(lo + slack, hi - slack, half_w);
-                    float counted = hit ? fill : band;
-                    if (counted > 0.0) {
+                    // The share of the footprint on the sheet's side of its
+                    // open edges (a halo: past its edge), where the ray
+                    // crosses its plane.
+                    vec2 ramp = vec2(1.0);  // (coverage, colour weight)
+                    if (halo || (sh.w & 0x77u) != 0x77u) {
+                        vec3 p = x_in + g_d * (nw != 0.0 ? -s_in / nw : 0.0);
+                        uint f0 = halo ? halo_face : sh.w & 7u;
+                        uint f1 = (sh.w >> 4u) & 7u;
+                        float sgn = halo ? -1.0 : 1.0;
+                        if (f0 != 7u) ramp *= edge_factors(f0, ((sh.w >> 3u) & 1u) == 1u, edge_angle((sh.w >> 11u) & 255u), p, nh, nw, foot, sgn);
+                        if (f1 != 7u) ramp *= edge_factors(f1, ((sh.w >> 7u) & 1u) == 1u, edge_angle((sh.w >> 19u) & 255u), p, nh, nw, foot, sgn);
+                    }
+                    float band_all = fill * crossing_fraction(lo + slack, hi - slack, half_w);
+                    float band = band_all * ramp.x;
+                    float counted = hit ? fill * ramp.x : band;
+                    float weight = hit ? fill * ramp.y : band_all * ramp.y;
+                    if (counted > 0.0 || weight > 0.0) {
                         if (!in_run) {
-                            run_open = g_run ? 1.0 - run_coverage() : 1.0;
+                            run_open = g_run ? 1.0 - run_sheets() : 1.0;
                             if (!g_run) {
                                 g_run = true;
                                 g_run_ref = nh;
                                 g_run_band = vec2(0.0);
                                 g_run_hit = vec2(0.0);
+                                g_run_halo = 0.0;
+                                g_run_edge = vec4(0.0);
                                 g_run_col = vec3(0.0);
                                 g_run_w = 0.0;
                                 g_run_tw = 0.0;
@@ -378,20 +452,36 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                         float along = dot(nh, g_run_ref);
                         float same = abs(along) >= RUN_PARALLEL ? nw * dot(g_run_ref, g_d) * along : 1.0;
                         int side = same >= 0.0 ? 0 : 1;
-                        g_run_band[side] += band;
-                        if (hit && abs(nw) < RUN_GRAZE) g_run_hit += vec2(fill);
-                        else g_run_hit[side] += hit ? fill : 0.0;
-                        steep = steep || (hit && abs(nw) >= RUN_STEEP);
-                        g_run_col += run_open * counted * c;
-                        g_run_w += run_open * counted;
-                        g_run_tw += run_open * counted * (t0 + th);
+                        if (halo) {
+                            // Halos of one edge's sheets overlap (a box's
+                            // silhouette: its two faces'): the largest.
+                            g_run_halo = max(g_run_halo, counted);
+                        } else if (ramp.x < 1.0) {
+                            // Cut by an edge: the faces of a silhouette's
+                            // crease overlap there, the largest.
+                            g_run_edge[side] = max(g_run_edge[side], band);
+                            float h = hit ? fill * ramp.x : 0.0;
+                            if (hit && abs(nw) < RUN_GRAZE) g_run_edge.zw = max(g_run_edge.zw, vec2(h));
+                            else g_run_edge[2 + side] = max(g_run_edge[2 + side], h);
+                        } else {
+                            g_run_band[side] += band;
+                            if (hit && abs(nw) < RUN_GRAZE) g_run_hit += vec2(fill);
+                            else g_run_hit[side] += hit ? fill : 0.0;
+                            steep = steep || (hit && abs(nw) >= RUN_STEEP);
+                        }
+                        // A halo is not hidden by the sheets before it (it
+                        // lies beside them on screen, past an edge).
+                        float wc = halo ? weight : run_open * weight;
+                        g_run_col += wc * c;
+                        g_run_w += wc;
+                        g_run_tw += wc * (t0 + th);
                     }
                 } else if (hit) {
                     ws = fill;
                     t_cross += fill * th;
                 }
             }
-            sheet_proj += a_s * abs(nw);
+            if (!halo) sheet_proj += a_s * abs(nw);
             crossed += ws;
             col_s += ws * c;
             float wf = max(area - a_s, 0.0) * abs(dot(ns, g_d));
