@@ -458,11 +458,12 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                             g_run_halo = max(g_run_halo, counted);
                         } else if (ramp.x < 1.0) {
                             // Cut by an edge: the faces of a silhouette's
-                            // crease overlap there, the largest.
+                            // crease overlap there, the largest. (No
+                            // grazing rule: that is a smooth surface's
+                            // tangent; a face seen edge-on beside a crease
+                            // must not undo the surface behind it.)
                             g_run_edge[side] = max(g_run_edge[side], band);
-                            float h = hit ? fill * ramp.x : 0.0;
-                            if (hit && abs(nw) < RUN_GRAZE) g_run_edge.zw = max(g_run_edge.zw, vec2(h));
-                            else g_run_edge[2 + side] = max(g_run_edge[2 + side], h);
+                            g_run_edge[2 + side] = max(g_run_edge[2 + side], hit ? fill * ramp.x : 0.0);
                         } else {
                             g_run_band[side] += band;
                             if (hit && abs(nw) < RUN_GRAZE) g_run_hit += vec2(fill);
@@ -541,7 +542,8 @@ void composite(int v, vec3 x_in, float t0, float chord) {
     }
     // A run crossed whole on its entering side, steeply, is settled: its far side
     // could only follow within RUN_GAP through an object under a voxel thick.
-    bool settled = steep && g_run_hit.x >= 1.0 && g_run_hit.y == 0.0;
+    vec2 run_hit = g_run_hit + g_run_edge.zw;
+    bool settled = steep && run_hit.x >= 1.0 && run_hit.y == 0.0;
     if (!(seg > 0.0)) {
         if (settled) close_run();
         return;

@@ -1028,16 +1028,13 @@ def trace_ray_np(
                     run["hit"] = run["hit"] + float((e["hit"] * graze)[whole].sum())
                     # Sheets an edge cuts: the largest per side (a silhouette's
                     # crease: its two faces overlap); halos: the largest.
+                    # (No grazing rule for them: volume.frag.)
                     cut = e["edge"]
                     for side in (0, 1):
                         on = cut & (other == side)
                         if on.any():
                             run["edge"][side] = max(run["edge"][side], float(e["band"][on].max()))
-                            h_side = e["hit"][on & ~graze]
-                            if len(h_side):
-                                run["edge"][2 + side] = max(run["edge"][2 + side], float(h_side.max()))
-                    if (cut & graze).any():
-                        run["edge"][2:] = np.maximum(run["edge"][2:], float(e["hit"][cut & graze].max()))
+                            run["edge"][2 + side] = max(run["edge"][2 + side], float(e["hit"][on].max()))
                     if e["halo"].any():
                         run["halo"] = max(run["halo"], float(e["counted"][e["halo"]].max()))
                     wc = np.where(e["halo"], 1.0, open_) * e["weight"]
@@ -1055,7 +1052,7 @@ def trace_ray_np(
         # A run crossed whole on its entering side, steeply, is settled (volume.frag).
         settled = (
             steep and run is not None
-            and run["hit"][0] >= 1.0 and run["hit"][1] == 0.0
+            and run["hit"][0] + run["edge"][2] >= 1.0 and run["hit"][1] + run["edge"][3] == 0.0
         )  # fmt: skip
         if not seg > 0.0:
             if settled:
