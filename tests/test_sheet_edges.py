@@ -77,9 +77,9 @@ def test_edge_ramp_is_the_footprint_share_across_the_projected_edge():
         t /= np.linalg.norm(t)
         u = np.eye(3)[a] - n[a] * n  # across the edge in the plane, along the axis
         q = p + u * ((side - p[a]) / u[a])  # on the edge: in the plane, on the face
-        proj = lambda v: v - (v @ w) * w  # noqa: E731
-        tp = proj(t) / np.linalg.norm(proj(t))
-        off = proj(p - q)
+        screen = np.eye(3) - np.outer(w, w)  # projection along the ray
+        tp = screen @ t / np.linalg.norm(screen @ t)
+        off = screen @ (p - q)
         dist = np.linalg.norm(off - (off @ tp) * tp)
         on_voxel_side = (p[a] < side) if side == 1 else (p[a] > side)
         signed = dist if on_voxel_side else -dist
