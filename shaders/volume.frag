@@ -191,6 +191,7 @@ vec4 g_run_edge;   // band (xy) and hit (zw) on each side of the sheets an open 
 vec3 g_run_col;    // its sheets' shaded colours, weighted by what they count
 float g_run_w;     // ... the weights' sum
 float g_run_tw;    // ... and the weighted crossing parameter (from o)
+vec4 g_run_far;    // the far side's part of g_run_col (rgb) and g_run_w (w)
 
 // Share in [0, 1] of a pixel's footprint, offsets o in [-half_w, half_w]
 // along the sheet's normal from the centre ray, whose rays cross the sheet's
@@ -211,9 +212,11 @@ float crossing_fraction(float lo, float hi, float half_w) {
 // crossing at |n.w| < RUN_GRAZE (a closed surface's tangent, where the side
 // falls either way as rounding goes) is on both sides.
 // Mirrors render/volume.py:run_coverage. close_run() composites the open
-// run as one layer, its colour and depth those of its sheets each weighted
-// by what it counts times what the run had left uncovered before its voxel
-// (the front-most surface's), and closes it.
+// run as one layer, its depth that of its sheets each weighted by what it
+// counts times what the run had left uncovered before its voxel (the
+// front-most surface's), its colour the same on each side, the near side's
+// where it covers the footprint and the far side's only where that covers
+// more (run_color()), and closes it.
 float run_sheets() {
     vec2 band = g_run_band + g_run_edge.xy;
     vec2 hit = g_run_hit + g_run_edge.zw;
@@ -227,6 +230,25 @@ float run_coverage() {
     return max(run_sheets(), g_run_halo);
 }
 
+// The open run's colour: each side's sheets' colours (its halos with the
+// near side), the near side's weighted by its coverage b0, the far side's
+// by what it covers beyond, b1 - b0: near a silhouette the far side lies
+// behind the near side, whose colour shows where both cover the footprint.
+// Mirrors render/volume.py:run_color.
+vec3 run_color() {
+    vec3 all_c = g_run_col / g_run_w;
+    float w0 = g_run_w - g_run_far.w;
+    if (!(g_run_far.w > 0.0) || !(w0 > 1e-6 * g_run_w)) return all_c;
+    vec2 band = g_run_band + g_run_edge.xy;
+    vec2 hit = g_run_hit + g_run_edge.zw;
+    float b0 = max(max(band.x, hit.y > 0.0 ? 0.0 : hit.x), g_run_halo);
+    float b1 = max(band.y - b0, 0.0);
+    if (!(b0 + b1 > 0.0)) return all_c;
+    vec3 c0 = (g_run_col - g_run_far.rgb) / w0;
+    vec3 c1 = g_run_far.rgb / g_run_far.w;
+    return (b0 * c0 + b1 * c1) / (b0 + b1);
+}
+
 void close_run() {
     if (!g_run) return;
     g_run = false;
@@ -237,7 +259,7 @@ void close_run() {
         g_t50 = g_run_tw / g_run_w;
         g_has50 = true;
     }
-    g_color += seg * (g_run_col / g_run_w);
+    g_color += seg * run_color();
     g_trans -= seg;
 }
 
@@ -438,6 +460,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                                 g_run_halo = 0.0;
                                 g_run_edge = vec4(0.0);
                                 g_run_col = vec3(0.0);
+                                g_run_far = vec4(0.0);
                                 g_run_w = 0.0;
                                 g_run_tw = 0.0;
                             }
@@ -476,6 +499,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                         g_run_col += wc * c;
                         g_run_w += wc;
                         g_run_tw += wc * (t0 + th);
+                        if (side == 1 && !halo) g_run_far += vec4(wc * c, wc);
                     }
                 } else if (hit) {
                     ws = fill;

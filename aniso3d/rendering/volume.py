@@ -618,6 +618,29 @@ def run_coverage(band: np.ndarray, hit: np.ndarray, halo: float = 0.0) -> float:
     return max(min(max(cov, 0.0), 1.0), float(halo))
 
 
+def run_color(run: dict) -> np.ndarray:
+    """(3,) the colour of a run (the NumPy ray's ``run``: per side the sums
+    ``band``, ``hit``, the sheets an edge cuts ``edge`` (band 0-1, hit 2-3),
+    the largest halo ``halo``, and the weighted colours ``col``/``w`` of all
+    its sheets, ``far_col``/``far_w`` of the far side's): each side's mean
+    colour (halos with the near side), the near side's weighted by its
+    coverage b0, the far side's by what it covers beyond, ``max(0, b1 - b0)``.
+    Near a silhouette the far side lies behind the near side, whose colour
+    shows where both cover the footprint. Mirrors run_color() in volume.frag."""
+    all_c = run["col"] / run["w"]
+    w0 = run["w"] - run["far_w"]
+    if not run["far_w"] > 0.0 or not w0 > 1e-6 * run["w"]:
+        return all_c
+    band, hit = run["band"] + run["edge"][:2], run["hit"] + run["edge"][2:]
+    b0 = max(band[0], 0.0 if hit[1] > 0.0 else hit[0], run["halo"])
+    b1 = max(band[1] - b0, 0.0)
+    if not b0 + b1 > 0.0:
+        return all_c
+    c0 = (run["col"] - run["far_col"]) / w0
+    c1 = run["far_col"] / run["far_w"]
+    return (b0 * c0 + b1 * c1) / (b0 + b1)
+
+
 def sheet_terms(
     texture: AnisoTexture,
     w: np.ndarray,
@@ -961,7 +984,8 @@ def trace_ray_np(
     tau_s, T_f = 0.0, 1.0  # "split": the sheets' linear depth, the cloud's transmittance
     # "planar": the open run of surface sheets (volume.frag: g_run...): per
     # side the sums of band and hit of sheets whole, the largest of those an
-    # edge cuts, the largest halo; colour, weight, weighted t (from the eye).
+    # edge cuts, the largest halo; colour, weight, weighted t (from the eye),
+    # and the far side's colour and weight (run_color).
     run: dict | None = None
 
     def run_sheets() -> float:
@@ -975,7 +999,7 @@ def trace_ray_np(
                 seg = T * cov
                 if out.t50 is None and T > 0.5 and T - seg <= 0.5:
                     out.t50 = run["tw"] / run["w"] * h
-                C = C + seg * run["col"] / run["w"]
+                C = C + seg * run_color(run)
                 T -= seg
         run = None
 
@@ -1015,7 +1039,7 @@ def trace_ray_np(
                     if run is None:
                         run = {"ref": e["normal"][0], "band": np.zeros(2), "hit": np.zeros(2),
                                "edge": np.zeros(4), "halo": 0.0, "col": np.zeros(3), "w": 0.0,
-                               "tw": 0.0}  # fmt: skip
+                               "far_col": np.zeros(3), "far_w": 0.0, "tw": 0.0}  # fmt: skip
                         open_ = 1.0
                     else:
                         open_ = 1.0 - run_sheets()
@@ -1041,6 +1065,9 @@ def trace_ray_np(
                     run["col"] = run["col"] + wc @ e["color"]
                     run["w"] += float(wc.sum())
                     run["tw"] += float(wc @ (e["t"] + ti))
+                    far = (other == 1) & ~e["halo"]
+                    run["far_col"] = run["far_col"] + wc[far] @ e["color"][far]
+                    run["far_w"] += float(wc[far].sum())
                     run["end"] = ti + chord
                 # Sheet and cloud share the facets: their coverages add.
                 a_s = min(st.crossed[k], 1.0)
