@@ -15,7 +15,8 @@
 // from the base (voxel units, may be negative); u_depth_k = far / (far -
 // near); u_shape grid cells, u_bricks brick cells; u_center_g grid centre
 // (grid coords, minimum corner at 0); u_num_dirs K; u_density_mode 0 facet /
-// 1 kernel / 2 nearest; u_normal_mode 0 mean / 1 sample; u_opacity_mode 0
+// 1 kernel / 2 nearest; u_normal_mode 0 mean / 1 sample; u_shading_mode 0
+// smooth (a run's sheets shaded by their linear models) / 1 flat; u_opacity_mode 0
 // exponential / 1 linear / 2 split / 3 planar; u_pixel_angle the angle a
 // pixel spans (radians, 2 tan(fov/2) / height) and u_sheet_pixels the voxel
 // sizes in pixels over which every sheet fades in (render/volume.py:
@@ -25,17 +26,23 @@
 // uniforms of lighting.glsl.
 // In (laid out by aniso3d/rendering/volume.py:pack_volume; 2D textures t_top ...
 // t_dirs, TEX_WIDTH texels a row, or with PLAIN_MARCH the same arrays as SSBOs):
+// The grid is the texture's with a margin of GRID_PAD cells each side
+// (render/sheet_edges.py: halos of edges on its outer planes).
 //   0 top[]      int, brick id of each brick cell or -1 (x fastest)
 //   1 pool[]     int, voxel index of each cell of each brick or -1
 //   2 offs[]     uint, CSR offsets of each voxel's shading entries (M + 1)
 //   3 dens[]     uint, density sphere D_v(N_p) (M x K) as float16 pairs
-//   4 ent[]      uvec4 x 3 per entry: (mean normal xyz, area) as float bits;
-//                (half2(kd.rg), half2(kd.b, ks), shininess bits, sample index);
+//   4 ent[]      uvec4 x 4 per entry: (mean normal xyz, area) as float bits;
+//                (half2(kd.rg), half2(kd.b, ks), half shininess | sample
+//                index << 16, half2(S11, S12) of its linear model);
 //                the entry's sheet (render/volume.py:entry_sheets): plane
 //                offset d as float bits (the plane n/|n| . x = d in
 //                voxel-local coordinates, the voxel being the unit cube),
-//                half2(fill, static share), sheet area and crossing slack as
-//                float bits
+//                half2(fill, static share), half2(sheet area, crossing
+//                slack), its edges (render/sheet_edges.py:edge_words: a
+//                halo, area 0, has its edge's face in bits 8-10); the rest
+//                of its linear model across its plane as half2 pairs (S22,
+//                dkd/du, dkd/dv: render/sheet_slopes.py, smooth_sheet())
 //   5 dirs[]     vec4, the K sample directions N_p (xyz)
 // Out: f_color = (C + T * background, 1 - T), C the premultiplied colour and
 // T the transmittance left; gl_FragDepth where 1 - T first reaches 0.5 (1.0
@@ -73,9 +80,10 @@ uniform ivec3 u_shape;
 uniform ivec3 u_bricks;
 uniform vec3 u_center_g;
 uniform int u_num_dirs;
-// The three modes are compiled in (render/volume.py: VolumeRenderer,
-// DENSITY_MODE, NORMAL_MODE, OPACITY_MODE: llvmpipe then drops the other
-// modes' code, 5% of a frame) or read as uniforms.
+// The four modes are compiled in (render/volume.py: VolumeRenderer,
+// DENSITY_MODE, NORMAL_MODE, SHADING_MODE, OPACITY_MODE: llvmpipe then drops
+// the other modes' code, 5% of a frame; smooth shading's code costs 12-20%
+// where it never runs) or read as uniforms.
 #ifdef DENSITY_MODE
 #define u_density_mode DENSITY_MODE
 #else
@@ -85,6 +93,11 @@ uniform int u_density_mode;
 #define u_normal_mode NORMAL_MODE
 #else
 uniform int u_normal_mode;
+#endif
+#ifdef SHADING_MODE
+#define u_shading_mode SHADING_MODE
+#else
+uniform int u_shading_mode;
 #endif
 #ifdef OPACITY_MODE
 #define u_opacity_mode OPACITY_MODE
@@ -306,6 +319,31 @@ float edge_angle(uint code) {
     return float(code) * (6.283185307179586 / 256.0) - 3.141592653589793;
 }
 
+// The shaded colour of sheet e (unit normal nh, of length len_n stored:
+// its coherence; plane nh.x = d; reflectance kd) at the point p of its
+// plane, by its linear model across the plane (render/sheet_slopes.py: the
+// shape operator (S11, S12, S22) and dkd/du, dkd/dv in the tangent frame of
+// nh, relative to the plane's point nearest the voxel's centre; u and v
+// clamped to a voxel). `slope` is entry word 7 (S11, S12); words 12-15 the
+// rest. Mirrors render/sheet_slopes.py:smoothed.
+vec3 smooth_sheet(uint e, uint slope, vec3 p, vec3 nh, float len_n, float d, vec3 kd, float ks, float shininess) {
+    uvec4 m = ENT(4u * e + 3u);
+    vec2 s12 = unpackHalf2x16(slope);
+    vec2 m0 = unpackHalf2x16(m.x);  // S22, dkd_r/du
+    vec2 m1 = unpackHalf2x16(m.y);  // dkd_r/dv, dkd_g/du
+    vec2 m2 = unpackHalf2x16(m.z);  // dkd_g/dv, dkd_b/du
+    vec2 m3 = unpackHalf2x16(m.w);  // dkd_b/dv
+    vec3 t1 = normalize(cross(nh, abs(nh.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0)));
+    vec3 t2 = cross(nh, t1);
+    vec3 rel = p - (vec3(0.5) - (dot(nh, vec3(0.5)) - d) * nh);
+    float u = clamp(dot(rel, t1), -1.0, 1.0);
+    float v = clamp(dot(rel, t2), -1.0, 1.0);
+    vec3 n = nh + (s12.x * u + s12.y * v) * t1 + (s12.y * u + m0.x * v) * t2;
+    n *= len_n / length(n);
+    vec3 k = max(kd + u * vec3(m0.y, m1.y, m2.y) + v * vec3(m1.x, m2.x, m3.x), 0.0);
+    return clamp(shade(n, -g_d, k, ks, shininess, len_n), 0.0, 1.0);
+}
+
 // The 4 samples nearest the line of w (density is even: D(w) = D(-w), so a
 // sample N_p also stands at -N_p) and Franke-Little weights
 // ((R - a) / (R a))^2 with R the angle of the 5th nearest: continuous in w,
@@ -381,16 +419,16 @@ void composite(int v, vec3 x_in, float t0, float chord) {
     float sum_f = 0.0;
     vec3 view = -g_d;
     for (uint e = e0; e < e1; ++e) {
-        uvec4 a = ENT(3u * e);
-        uvec4 b = ENT(3u * e + 1u);
+        uvec4 a = ENT(4u * e);
+        uvec4 b = ENT(4u * e + 1u);
         vec3 n = uintBitsToFloat(a.xyz);
         float area = uintBitsToFloat(a.w);
         vec2 kd_rg = unpackHalf2x16(b.x);
         vec2 kd_b_ks = unpackHalf2x16(b.y);
-        float shininess = uintBitsToFloat(b.z);
+        float shininess = unpackHalf2x16(b.z).x;
         base_w += area * abs(dot(n, g_d));
         base_nb += area * abs(n * g_nbdir);
-        vec3 ns = u_normal_mode == 0 ? n : DIR(b.w).xyz;
+        vec3 ns = u_normal_mode == 0 ? n : DIR(b.z >> 16u).xyz;
         float wgt = area * abs(dot(ns, g_d));
         // The mean normal's length is its facets' coherence (lighting.glsl).
         vec3 c = clamp(shade(ns, view, vec3(kd_rg, kd_b_ks.x), kd_b_ks.y, shininess, length(n)), 0.0, 1.0);
@@ -399,7 +437,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
         col_a += area * c;
         sum_a += area;
         if (sheets) {
-            uvec4 sh = ENT(3u * e + 2u);
+            uvec4 sh = ENT(4u * e + 2u);
             // A halo (render/sheet_edges.py) counts in runs only.
             uint halo_face = (sh.w >> 8u) & 7u;
             bool halo = halo_face != 7u;
@@ -496,10 +534,18 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                         // A halo is not hidden by the sheets before it (it
                         // lies beside them on screen, past an edge).
                         float wc = halo ? weight : run_open * weight;
-                        g_run_col += wc * c;
+                        // Shaded where the ray crosses the plane, by the
+                        // sheet's linear model across it (sheet_slopes).
+                        vec3 cr = c;
+                        if (!halo && u_normal_mode == 0 && u_shading_mode == 0) {
+                            vec3 p = x_in + g_d * (nw != 0.0 ? -s_in / nw : 0.0);
+                            cr = smooth_sheet(e, b.w, p, nh, len_n, uintBitsToFloat(sh.x), vec3(kd_rg, kd_b_ks.x),
+                                              kd_b_ks.y, shininess);
+                        }
+                        g_run_col += wc * cr;
                         g_run_w += wc;
                         g_run_tw += wc * (t0 + th);
-                        if (side == 1 && !halo) g_run_far += vec4(wc * c, wc);
+                        if (side == 1 && !halo) g_run_far += vec4(wc * cr, wc);
                     }
                 } else if (hit) {
                     ws = fill;
