@@ -57,7 +57,14 @@ conventions"), with ``P(w) = |wx| + |wy| + |wz|`` and h the voxel edge:
   a corner), else (a near miss, or through both sides of a silhouette) by
   the share of the pixel's footprint whose rays cross them inside their
   voxels (:func:`crossing_fraction`), on the side that most do
-  (:func:`run_coverage`; docs/coverage.md). ``opacity="split"`` is the
+  (:func:`run_coverage`; docs/coverage.md). Where a surface sheet ends on a
+  voxel face (a wall's top on a grid plane) or creases into another (a
+  box's edge), the share of the footprint across the edge is cut from it and
+  carried by a halo in the voxel past the edge
+  (:mod:`~aniso3d.rendering.sheet_edges`; the GPU grid has a margin of
+  :data:`~aniso3d.rendering.sheet_edges.GRID_PAD` voxels for them), and a
+  run's colour is its near side's where that covers the footprint
+  (:func:`run_color`). ``opacity="split"`` is the
   candidate that keeps the chord: sheets add up linearly along the ray (T =
   ``max(0, 1 - tau_s) exp(-tau_f)``); measured, it keeps the stripes of
   "linear" on tilted planes;
@@ -66,7 +73,11 @@ conventions"), with ``P(w) = |wx| + |wy| + |wz|`` and h the voxel edge:
   ray) weighted by ``A_e |n_e . w|``, ``n_e`` the entry's mean facet normal
   (``normal="mean"``) or its sample direction (``normal="sample"``, the
   paper's reading); each shaded colour is clamped to [0, 1] first, as the
-  polygon renderer clamps each fragment.
+  polygon renderer clamps each fragment. With ``shading="smooth"``
+  (default, :data:`SHADING_MODES`) a run's surface sheets are shaded where
+  the ray crosses them, by their linear models of normal and reflectance
+  across their planes (:mod:`~aniso3d.rendering.sheet_slopes`), so that a
+  smooth surface does not shade in steps a voxel wide.
 
 Front to back, stopping when T falls below :data:`T_MIN` (the rest then
 takes the colour seen so far: ``C / (1 - T)``, T = 0). The pixel is
