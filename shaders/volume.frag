@@ -60,7 +60,8 @@ vec3 g_light_dir[4];
 #endif
 #include "lighting.glsl"
 
-// Injected by render/volume.py: BRICK (brick edge in voxels), ALPHA_MAX
+// Injected by render/volume.py: BRICK (brick edge in voxels), GRID_PAD and
+// CLIP_MARGIN (the grid's margin, and the part of it rays cross), ALPHA_MAX
 // (coverage cap below 1 so the optical depth stays finite), T_MIN (early
 // termination; T_MIN_PLAIN in the plain marching), BIG (stands for an
 // infinite ray parameter), RUN_SHARE, RUN_GAP, RUN_PARALLEL, RUN_STEEP and RUN_GRAZE
@@ -699,12 +700,15 @@ void main() {
     float cos_f = dot(g_d, RAY_FORWARD);
     float t0 = RAY_NEAR_B / cos_f;
     float t1 = RAY_FAR_B / cos_f;
-    vec3 hi = vec3(u_shape);
+    // The texture's box widened by CLIP_MARGIN voxels, where the halos lie,
+    // inside the grid's margin of GRID_PAD (the rest of it is empty).
+    float box_lo = float(GRID_PAD - CLIP_MARGIN);
+    vec3 hi = vec3(u_shape) - box_lo;
     for (int a = 0; a < 3; ++a) {
         if (g_d[a] == 0.0) {
-            if (o[a] < 0.0 || o[a] > hi[a]) discard;
+            if (o[a] < box_lo || o[a] > hi[a]) discard;
         } else {
-            float ta = (0.0 - o[a]) / g_d[a];
+            float ta = (box_lo - o[a]) / g_d[a];
             float tb = (hi[a] - o[a]) / g_d[a];
             t0 = max(t0, min(ta, tb));
             t1 = min(t1, max(ta, tb));
