@@ -15,7 +15,8 @@
 // from the base (voxel units, may be negative); u_depth_k = far / (far -
 // near); u_shape grid cells, u_bricks brick cells; u_center_g grid centre
 // (grid coords, minimum corner at 0); u_num_dirs K; u_density_mode 0 facet /
-// 1 kernel / 2 nearest; u_normal_mode 0 mean / 1 sample; u_opacity_mode 0
+// 1 kernel / 2 nearest; u_normal_mode 0 mean / 1 sample; u_shading_mode 0
+// smooth (a run's sheets shaded by their linear models) / 1 flat; u_opacity_mode 0
 // exponential / 1 linear / 2 split / 3 planar; u_pixel_angle the angle a
 // pixel spans (radians, 2 tan(fov/2) / height) and u_sheet_pixels the voxel
 // sizes in pixels over which every sheet fades in (render/volume.py:
@@ -25,17 +26,23 @@
 // uniforms of lighting.glsl.
 // In (laid out by aniso3d/rendering/volume.py:pack_volume; 2D textures t_top ...
 // t_dirs, TEX_WIDTH texels a row, or with PLAIN_MARCH the same arrays as SSBOs):
+// The grid is the texture's with a margin of GRID_PAD cells each side
+// (render/sheet_edges.py: halos of edges on its outer planes).
 //   0 top[]      int, brick id of each brick cell or -1 (x fastest)
 //   1 pool[]     int, voxel index of each cell of each brick or -1
 //   2 offs[]     uint, CSR offsets of each voxel's shading entries (M + 1)
 //   3 dens[]     uint, density sphere D_v(N_p) (M x K) as float16 pairs
-//   4 ent[]      uvec4 x 3 per entry: (mean normal xyz, area) as float bits;
-//                (half2(kd.rg), half2(kd.b, ks), shininess bits, sample index);
+//   4 ent[]      uvec4 x 4 per entry: (mean normal xyz, area) as float bits;
+//                (half2(kd.rg), half2(kd.b, ks), half shininess | sample
+//                index << 16, half2(S11, S12) of its linear model);
 //                the entry's sheet (render/volume.py:entry_sheets): plane
 //                offset d as float bits (the plane n/|n| . x = d in
 //                voxel-local coordinates, the voxel being the unit cube),
-//                half2(fill, static share), sheet area and crossing slack as
-//                float bits
+//                half2(fill, static share), half2(sheet area, crossing
+//                slack), its edges (render/sheet_edges.py:edge_words: a
+//                halo, area 0, has its edge's face in bits 8-10); the rest
+//                of its linear model across its plane as half2 pairs (S22,
+//                dkd/du, dkd/dv: render/sheet_slopes.py, smooth_sheet())
 //   5 dirs[]     vec4, the K sample directions N_p (xyz)
 // Out: f_color = (C + T * background, 1 - T), C the premultiplied colour and
 // T the transmittance left; gl_FragDepth where 1 - T first reaches 0.5 (1.0
@@ -53,7 +60,8 @@ vec3 g_light_dir[4];
 #endif
 #include "lighting.glsl"
 
-// Injected by render/volume.py: BRICK (brick edge in voxels), ALPHA_MAX
+// Injected by render/volume.py: BRICK (brick edge in voxels), GRID_PAD and
+// CLIP_MARGIN (the grid's margin, and the part of it rays cross), ALPHA_MAX
 // (coverage cap below 1 so the optical depth stays finite), T_MIN (early
 // termination; T_MIN_PLAIN in the plain marching), BIG (stands for an
 // infinite ray parameter), RUN_SHARE, RUN_GAP, RUN_PARALLEL, RUN_STEEP and RUN_GRAZE
@@ -73,9 +81,10 @@ uniform ivec3 u_shape;
 uniform ivec3 u_bricks;
 uniform vec3 u_center_g;
 uniform int u_num_dirs;
-// The three modes are compiled in (render/volume.py: VolumeRenderer,
-// DENSITY_MODE, NORMAL_MODE, OPACITY_MODE: llvmpipe then drops the other
-// modes' code, 5% of a frame) or read as uniforms.
+// The four modes are compiled in (render/volume.py: VolumeRenderer,
+// DENSITY_MODE, NORMAL_MODE, SHADING_MODE, OPACITY_MODE: llvmpipe then drops
+// the other modes' code, 5% of a frame; smooth shading's code costs 12-20%
+// where it never runs) or read as uniforms.
 #ifdef DENSITY_MODE
 #define u_density_mode DENSITY_MODE
 #else
@@ -85,6 +94,11 @@ uniform int u_density_mode;
 #define u_normal_mode NORMAL_MODE
 #else
 uniform int u_normal_mode;
+#endif
+#ifdef SHADING_MODE
+#define u_shading_mode SHADING_MODE
+#else
+uniform int u_shading_mode;
 #endif
 #ifdef OPACITY_MODE
 #define u_opacity_mode OPACITY_MODE
@@ -185,9 +199,13 @@ vec3 g_run_ref;    // the unit normal of its first sheet
 float g_run_end;   // ray parameter where its last voxel ends
 vec2 g_run_band;   // share of the footprint crossing its sheets, on each side
 vec2 g_run_hit;    // fills of the sheets the centre ray crosses, on each side
+float g_run_halo;  // the largest share of the footprint its halos carry past an edge
+vec4 g_run_edge;   // band (xy) and hit (zw) on each side of the sheets an open edge
+                   // or silhouette crease cuts: the largest (one edge's faces overlap)
 vec3 g_run_col;    // its sheets' shaded colours, weighted by what they count
 float g_run_w;     // ... the weights' sum
 float g_run_tw;    // ... and the weighted crossing parameter (from o)
+vec4 g_run_far;    // the far side's part of g_run_col (rgb) and g_run_w (w)
 
 // Share in [0, 1] of a pixel's footprint, offsets o in [-half_w, half_w]
 // along the sheet's normal from the centre ray, whose rays cross the sheet's
@@ -208,13 +226,41 @@ float crossing_fraction(float lo, float hi, float half_w) {
 // crossing at |n.w| < RUN_GRAZE (a closed surface's tangent, where the side
 // falls either way as rounding goes) is on both sides.
 // Mirrors render/volume.py:run_coverage. close_run() composites the open
-// run as one layer, its colour and depth those of its sheets each weighted
-// by what it counts times what the run had left uncovered before its voxel
-// (the front-most surface's), and closes it.
-float run_coverage() {
-    float cov = max(g_run_band.x, g_run_band.y);
-    if (g_run_hit.x > 0.0 && !(g_run_hit.y > 0.0)) cov = max(cov, g_run_hit.x);
+// run as one layer, its depth that of its sheets each weighted by what it
+// counts times what the run had left uncovered before its voxel (the
+// front-most surface's), its colour the same on each side, the near side's
+// where it covers the footprint and the far side's only where that covers
+// more (run_color()), and closes it.
+float run_sheets() {
+    vec2 band = g_run_band + g_run_edge.xy;
+    vec2 hit = g_run_hit + g_run_edge.zw;
+    float cov = max(band.x, band.y);
+    if (hit.x > 0.0 && !(hit.y > 0.0)) cov = max(cov, hit.x);
     return clamp(cov, 0.0, 1.0);
+}
+
+// ... and with its halos (render/sheet_edges.py): the larger.
+float run_coverage() {
+    return max(run_sheets(), g_run_halo);
+}
+
+// The open run's colour: each side's sheets' colours (its halos with the
+// near side), the near side's weighted by its coverage b0, the far side's
+// by what it covers beyond, b1 - b0: near a silhouette the far side lies
+// behind the near side, whose colour shows where both cover the footprint.
+// Mirrors render/volume.py:run_color.
+vec3 run_color() {
+    vec3 all_c = g_run_col / g_run_w;
+    float w0 = g_run_w - g_run_far.w;
+    if (!(g_run_far.w > 0.0) || !(w0 > 1e-6 * g_run_w)) return all_c;
+    vec2 band = g_run_band + g_run_edge.xy;
+    vec2 hit = g_run_hit + g_run_edge.zw;
+    float b0 = max(max(band.x, hit.y > 0.0 ? 0.0 : hit.x), g_run_halo);
+    float b1 = max(band.y - b0, 0.0);
+    if (!(b0 + b1 > 0.0)) return all_c;
+    vec3 c0 = (g_run_col - g_run_far.rgb) / w0;
+    vec3 c1 = g_run_far.rgb / g_run_far.w;
+    return (b0 * c0 + b1 * c1) / (b0 + b1);
 }
 
 void close_run() {
@@ -227,8 +273,76 @@ void close_run() {
         g_t50 = g_run_tw / g_run_w;
         g_has50 = true;
     }
-    g_color += seg * (g_run_col / g_run_w);
+    g_color += seg * run_color();
     g_trans -= seg;
+}
+
+// Share of the pixel's footprint (width foot, grid units across the ray) on
+// a sheet's side of its edge on voxel face `face` (2 axis + side) where the
+// ray crosses the sheet's plane at the voxel-local p: sgn +1 for the
+// sheet's own edge (the sheet on the voxel's side of the face), -1 for a
+// halo (the sheet past it). The crossing lies delta from the face along its
+// axis, delta |n.w| / sqrt(1 - n_a^2 - (w x n)_a^2) from the edge seen along
+// the ray: a ramp over the footprint, 1/2 on the edge. Mirrors
+// render/sheet_edges.py:edge_ramp.
+float edge_ramp(uint face, vec3 p, vec3 nh, float nw, float foot, float sgn) {
+    int ax = int(face >> 1u);
+    float delta = (face & 1u) == 1u ? 1.0 - p[ax] : p[ax];
+    float ca = cross(g_d, nh)[ax];
+    float den = sqrt(max(1.0 - nh[ax] * nh[ax] - ca * ca, 1e-12));
+    return clamp(0.5 + sgn * delta * abs(nw) / (den * max(foot, 1e-12)), 0.0, 1.0);
+}
+
+// What a sheet's edge on voxel face `face` leaves of its coverage (x) and
+// its colour's weight (y) where the ray crosses its plane at p: an open
+// edge, or a crease seen as a silhouette (its two half-planes, the sheet's
+// and the partner's at angle phi about the edge, on one side of it on
+// screen), the ramp, save that the halo of the face turned away carries
+// nothing; any other crease (both faces seen, a concave corner) its
+// coverage whole and its colour by the ramp; a halo the ramp (sgn -1).
+// Mirrors render/sheet_edges.py:edge_factors.
+vec2 edge_factors(uint face, bool crease, float phi, vec3 p, vec3 nh, float nw, float foot, float sgn) {
+    float ramp = edge_ramp(face, p, nh, nw, foot, sgn);
+    if (!crease) return vec2(ramp);
+    int ax = int(face >> 1u);
+    vec3 s = vec3(0.0);
+    s[ax] = (face & 1u) == 1u ? -sgn : sgn;
+    vec3 u = normalize(s - dot(s, nh) * nh);
+    vec3 nu = cross(g_d, cross(nh, u));
+    float al = dot(nu, u);
+    float be = dot(nu, nh);
+    bool silhouette = al * (al * cos(phi) + be * sin(phi)) > 0.0;
+    if (sgn < 0.0) return (silhouette && sin(phi) * nw <= 0.0) ? vec2(0.0) : vec2(ramp);
+    return silhouette ? vec2(ramp) : vec2(1.0, ramp);
+}
+
+float edge_angle(uint code) {
+    return float(code) * (6.283185307179586 / 256.0) - 3.141592653589793;
+}
+
+// The shaded colour of sheet e (unit normal nh, of length len_n stored:
+// its coherence; plane nh.x = d; reflectance kd) at the point p of its
+// plane, by its linear model across the plane (render/sheet_slopes.py: the
+// shape operator (S11, S12, S22) and dkd/du, dkd/dv in the tangent frame of
+// nh, relative to the plane's point nearest the voxel's centre; u and v
+// clamped to a voxel). `slope` is entry word 7 (S11, S12); words 12-15 the
+// rest. Mirrors render/sheet_slopes.py:smoothed.
+vec3 smooth_sheet(uint e, uint slope, vec3 p, vec3 nh, float len_n, float d, vec3 kd, float ks, float shininess) {
+    uvec4 m = ENT(4u * e + 3u);
+    vec2 s12 = unpackHalf2x16(slope);
+    vec2 m0 = unpackHalf2x16(m.x);  // S22, dkd_r/du
+    vec2 m1 = unpackHalf2x16(m.y);  // dkd_r/dv, dkd_g/du
+    vec2 m2 = unpackHalf2x16(m.z);  // dkd_g/dv, dkd_b/du
+    vec2 m3 = unpackHalf2x16(m.w);  // dkd_b/dv
+    vec3 t1 = normalize(cross(nh, abs(nh.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0)));
+    vec3 t2 = cross(nh, t1);
+    vec3 rel = p - (vec3(0.5) - (dot(nh, vec3(0.5)) - d) * nh);
+    float u = clamp(dot(rel, t1), -1.0, 1.0);
+    float v = clamp(dot(rel, t2), -1.0, 1.0);
+    vec3 n = nh + (s12.x * u + s12.y * v) * t1 + (s12.y * u + m0.x * v) * t2;
+    n *= len_n / length(n);
+    vec3 k = max(kd + u * vec3(m0.y, m1.y, m2.y) + v * vec3(m1.x, m2.x, m3.x), 0.0);
+    return clamp(shade(n, -g_d, k, ks, shininess, len_n), 0.0, 1.0);
 }
 
 // The 4 samples nearest the line of w (density is even: D(w) = D(-w), so a
@@ -306,16 +420,16 @@ void composite(int v, vec3 x_in, float t0, float chord) {
     float sum_f = 0.0;
     vec3 view = -g_d;
     for (uint e = e0; e < e1; ++e) {
-        uvec4 a = ENT(3u * e);
-        uvec4 b = ENT(3u * e + 1u);
+        uvec4 a = ENT(4u * e);
+        uvec4 b = ENT(4u * e + 1u);
         vec3 n = uintBitsToFloat(a.xyz);
         float area = uintBitsToFloat(a.w);
         vec2 kd_rg = unpackHalf2x16(b.x);
         vec2 kd_b_ks = unpackHalf2x16(b.y);
-        float shininess = uintBitsToFloat(b.z);
+        float shininess = unpackHalf2x16(b.z).x;
         base_w += area * abs(dot(n, g_d));
         base_nb += area * abs(n * g_nbdir);
-        vec3 ns = u_normal_mode == 0 ? n : DIR(b.w).xyz;
+        vec3 ns = u_normal_mode == 0 ? n : DIR(b.z >> 16u).xyz;
         float wgt = area * abs(dot(ns, g_d));
         // The mean normal's length is its facets' coherence (lighting.glsl).
         vec3 c = clamp(shade(ns, view, vec3(kd_rg, kd_b_ks.x), kd_b_ks.y, shininess, length(n)), 0.0, 1.0);
@@ -324,11 +438,16 @@ void composite(int v, vec3 x_in, float t0, float chord) {
         col_a += area * c;
         sum_a += area;
         if (sheets) {
-            uvec4 sh = ENT(3u * e + 2u);
+            uvec4 sh = ENT(4u * e + 2u);
+            // A halo (render/sheet_edges.py) counts in runs only.
+            uint halo_face = (sh.w >> 8u) & 7u;
+            bool halo = halo_face != 7u;
+            if (halo && !(u_opacity_mode == 3 && foot > 0.0)) continue;
             vec2 fill_share = unpackHalf2x16(sh.y);
             float share = 1.0 - (1.0 - fill_share.y) * (1.0 - zoom);
             float fill = share * fill_share.x;
-            float a_s = share * uintBitsToFloat(sh.z);
+            vec2 area_slack = unpackHalf2x16(sh.z);
+            float a_s = share * area_slack.x;
             float len_n = length(n);
             vec3 nh = len_n > 0.0 ? n / len_n : vec3(0.0);
             float nw = dot(nh, g_d);
@@ -341,7 +460,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                 // into many, whatever the angle.
                 float s_in = dot(nh, x_in) - uintBitsToFloat(sh.x);
                 float s_out = s_in + nw * chord;
-                float slack = uintBitsToFloat(sh.w);
+                float slack = area_slack.y;
                 float lo = -max(s_in, s_out) - slack;
                 float hi = -min(s_in, s_out) + slack;
                 bool hit = lo <= 0.0 && hi >= 0.0;
@@ -353,17 +472,34 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                     float half_w = 0.5 * foot * sqrt(max(1.0 - nw * nw, 0.0));
                     // (Without the slack: it only keeps a centre ray from
                     // slipping between neighbouring planes.)
-                    float band = fill * crossing_fraction(lo + slack, hi - slack, half_w);
-                    float counted = hit ? fill : band;
-                    if (counted > 0.0) {
+                    // The share of the footprint on the sheet's side of its
+                    // open edges (a halo: past its edge), where the ray
+                    // crosses its plane.
+                    vec2 ramp = vec2(1.0);  // (coverage, colour weight)
+                    if (halo || (sh.w & 0x77u) != 0x77u) {
+                        vec3 p = x_in + g_d * (nw != 0.0 ? -s_in / nw : 0.0);
+                        uint f0 = halo ? halo_face : sh.w & 7u;
+                        uint f1 = (sh.w >> 4u) & 7u;
+                        float sgn = halo ? -1.0 : 1.0;
+                        if (f0 != 7u) ramp *= edge_factors(f0, ((sh.w >> 3u) & 1u) == 1u, edge_angle((sh.w >> 11u) & 255u), p, nh, nw, foot, sgn);
+                        if (f1 != 7u) ramp *= edge_factors(f1, ((sh.w >> 7u) & 1u) == 1u, edge_angle((sh.w >> 19u) & 255u), p, nh, nw, foot, sgn);
+                    }
+                    float band_all = fill * crossing_fraction(lo + slack, hi - slack, half_w);
+                    float band = band_all * ramp.x;
+                    float counted = hit ? fill * ramp.x : band;
+                    float weight = hit ? fill * ramp.y : band_all * ramp.y;
+                    if (counted > 0.0 || weight > 0.0) {
                         if (!in_run) {
-                            run_open = g_run ? 1.0 - run_coverage() : 1.0;
+                            run_open = g_run ? 1.0 - run_sheets() : 1.0;
                             if (!g_run) {
                                 g_run = true;
                                 g_run_ref = nh;
                                 g_run_band = vec2(0.0);
                                 g_run_hit = vec2(0.0);
+                                g_run_halo = 0.0;
+                                g_run_edge = vec4(0.0);
                                 g_run_col = vec3(0.0);
+                                g_run_far = vec4(0.0);
                                 g_run_w = 0.0;
                                 g_run_tw = 0.0;
                             }
@@ -378,20 +514,46 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                         float along = dot(nh, g_run_ref);
                         float same = abs(along) >= RUN_PARALLEL ? nw * dot(g_run_ref, g_d) * along : 1.0;
                         int side = same >= 0.0 ? 0 : 1;
-                        g_run_band[side] += band;
-                        if (hit && abs(nw) < RUN_GRAZE) g_run_hit += vec2(fill);
-                        else g_run_hit[side] += hit ? fill : 0.0;
-                        steep = steep || (hit && abs(nw) >= RUN_STEEP);
-                        g_run_col += run_open * counted * c;
-                        g_run_w += run_open * counted;
-                        g_run_tw += run_open * counted * (t0 + th);
+                        if (halo) {
+                            // Halos of one edge's sheets overlap (a box's
+                            // silhouette: its two faces'): the largest.
+                            g_run_halo = max(g_run_halo, counted);
+                        } else if (ramp.x < 1.0) {
+                            // Cut by an edge: the faces of a silhouette's
+                            // crease overlap there, the largest. (No
+                            // grazing rule: that is a smooth surface's
+                            // tangent; a face seen edge-on beside a crease
+                            // must not undo the surface behind it.)
+                            g_run_edge[side] = max(g_run_edge[side], band);
+                            g_run_edge[2 + side] = max(g_run_edge[2 + side], hit ? fill * ramp.x : 0.0);
+                        } else {
+                            g_run_band[side] += band;
+                            if (hit && abs(nw) < RUN_GRAZE) g_run_hit += vec2(fill);
+                            else g_run_hit[side] += hit ? fill : 0.0;
+                            steep = steep || (hit && abs(nw) >= RUN_STEEP);
+                        }
+                        // A halo is not hidden by the sheets before it (it
+                        // lies beside them on screen, past an edge).
+                        float wc = halo ? weight : run_open * weight;
+                        // Shaded where the ray crosses the plane, by the
+                        // sheet's linear model across it (sheet_slopes).
+                        vec3 cr = c;
+                        if (!halo && u_normal_mode == 0 && u_shading_mode == 0) {
+                            vec3 p = x_in + g_d * (nw != 0.0 ? -s_in / nw : 0.0);
+                            cr = smooth_sheet(e, b.w, p, nh, len_n, uintBitsToFloat(sh.x), vec3(kd_rg, kd_b_ks.x),
+                                              kd_b_ks.y, shininess);
+                        }
+                        g_run_col += wc * cr;
+                        g_run_w += wc;
+                        g_run_tw += wc * (t0 + th);
+                        if (side == 1 && !halo) g_run_far += vec4(wc * cr, wc);
                     }
                 } else if (hit) {
                     ws = fill;
                     t_cross += fill * th;
                 }
             }
-            sheet_proj += a_s * abs(nw);
+            if (!halo) sheet_proj += a_s * abs(nw);
             crossed += ws;
             col_s += ws * c;
             float wf = max(area - a_s, 0.0) * abs(dot(ns, g_d));
@@ -451,7 +613,8 @@ void composite(int v, vec3 x_in, float t0, float chord) {
     }
     // A run crossed whole on its entering side, steeply, is settled: its far side
     // could only follow within RUN_GAP through an object under a voxel thick.
-    bool settled = steep && g_run_hit.x >= 1.0 && g_run_hit.y == 0.0;
+    vec2 run_hit = g_run_hit + g_run_edge.zw;
+    bool settled = steep && run_hit.x >= 1.0 && run_hit.y == 0.0;
     if (!(seg > 0.0)) {
         if (settled) close_run();
         return;
@@ -537,12 +700,15 @@ void main() {
     float cos_f = dot(g_d, RAY_FORWARD);
     float t0 = RAY_NEAR_B / cos_f;
     float t1 = RAY_FAR_B / cos_f;
-    vec3 hi = vec3(u_shape);
+    // The texture's box widened by CLIP_MARGIN voxels, where the halos lie,
+    // inside the grid's margin of GRID_PAD (the rest of it is empty).
+    float box_lo = float(GRID_PAD - CLIP_MARGIN);
+    vec3 hi = vec3(u_shape) - box_lo;
     for (int a = 0; a < 3; ++a) {
         if (g_d[a] == 0.0) {
-            if (o[a] < 0.0 || o[a] > hi[a]) discard;
+            if (o[a] < box_lo || o[a] > hi[a]) discard;
         } else {
-            float ta = (0.0 - o[a]) / g_d[a];
+            float ta = (box_lo - o[a]) / g_d[a];
             float tb = (hi[a] - o[a]) / g_d[a];
             t0 = max(t0, min(ta, tb));
             t1 = min(t1, max(ta, tb));

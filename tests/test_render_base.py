@@ -48,7 +48,9 @@ def test_each_renderer_declares_its_options_as_a_frozen_dataclass(method):
 
 def test_option_names_are_what_front_ends_read():
     assert SplatOptions.names() == ("splat", "quality", "size_factor", "aspect", "push", "pixel_error")
-    assert VolumeOptions.names() == ("step", "density", "normal", "opacity", "pixel_error", "march", "edges", "start")
+    assert VolumeOptions.names() == (
+        "step", "density", "normal", "shading", "opacity", "pixel_error", "march", "edges", "start"
+    )
     assert MeshOptions.names() == ()
     assert "quality" in SplatOptions.names() and "quality" not in VolumeOptions.names()
 
@@ -62,6 +64,7 @@ def test_option_names_are_what_front_ends_read():
         (SplatOptions, {"push": "far"}, "push"),
         (VolumeOptions, {"opacity": "max"}, "'max'"),
         (VolumeOptions, {"density": 3}, "density"),
+        (VolumeOptions, {"shading": "phong"}, "'phong'"),
         (VolumeOptions, {"pixel_error": -1.0}, "pixel_error"),
         (BuildOptions, {"resolution": 0}, "resolution"),
         (BuildOptions, {"resolution": 2.5}, "resolution"),

@@ -18,12 +18,14 @@ from aniso3d.build.mesh import concatenate
 from aniso3d.rendering.camera import Camera
 from aniso3d.rendering.frame import FrameView
 from aniso3d.rendering.images import save_png
+from aniso3d.rendering.sheet_edges import GRID_PAD
 from aniso3d.rendering.volume import (
     BRICK,
     density_along,
     direction_weights,
     march_ray_np,
     pack_volume,
+    pack_volume_grid,
     trace_ray_np,
 )
 
@@ -109,11 +111,16 @@ def pixel_rays(cam: Camera, size, bounds):
 
 
 def test_pack_volume_index_round_trip():
+    """The index gives each voxel's own index in the GPU grid (the texture's
+    with a margin of GRID_PAD cells each side; a sphere has no edges, so no
+    halos and no other voxels)."""
     s = aniso3d.scenes.sphere(1.0, subdivisions=2)
     tex = aniso3d.build_texture(s, 20, 16)
-    packed = pack_volume(tex)
-    bricks = -(-np.asarray(tex.shape) // BRICK)
-    c = tex.coords.astype(np.int64)
+    grid = pack_volume_grid(tex)
+    packed = grid.arrays
+    np.testing.assert_array_equal(grid.shape, np.asarray(tex.shape) + 2 * GRID_PAD)
+    bricks = -(-grid.shape // BRICK)
+    c = tex.coords.astype(np.int64) + GRID_PAD
     b = c // BRICK
     bid = packed["top"][(b[:, 2] * bricks[1] + b[:, 1]) * bricks[0] + b[:, 0]]
     assert np.all(bid >= 0)
@@ -544,7 +551,9 @@ def test_refuses_what_does_not_fit(r, quad_tex):
     _, tex = quad_tex
     impl = r.method_renderer("volume")
     saved = impl.max_block
-    impl.max_block = 8192  # the density (256 x 64 float16 = 32 KiB) does not fit
+    # The density ((256 voxels + 64 of its edges' halos) x 64 float16 = 40
+    # KiB) does not fit; the arrays before it (the index: 24 KiB) do.
+    impl.max_block = 32768
     try:
         with pytest.raises(
             ResourceError, match="'density' buffer.*lower --resolution or --directions"

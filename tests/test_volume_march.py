@@ -17,7 +17,8 @@ import pytest
 import aniso3d
 from aniso3d.rendering.camera import Camera
 from aniso3d.rendering.images import save_png
-from aniso3d.rendering.volume import BRICK, T_MIN, T_MIN_PLAIN, TEX_WIDTH, pack_volume
+from aniso3d.rendering.sheet_edges import GRID_PAD
+from aniso3d.rendering.volume import BRICK, T_MIN, T_MIN_PLAIN, TEX_WIDTH, pack_volume, pack_volume_grid
 
 SIZE = (96, 96)
 
@@ -39,13 +40,19 @@ def test_termination_bound_is_within_the_tolerance():
 
 def test_occupancy_index_against_brute_force(scenes):
     """top[] marks a brick occupied exactly when one of its voxels is, and
-    pool[] gives each occupied voxel's index: against a dense grid."""
+    pool[] gives each occupied voxel's index: against a dense grid (the GPU
+    grid: the texture's with a margin, its voxels then those holding only
+    halos of edges, which the lattice has)."""
     for tex in scenes.values():
-        packed = pack_volume(tex)
-        shape = np.asarray(tex.shape)
+        grid = pack_volume_grid(tex)
+        packed = grid.arrays
+        shape = grid.shape
+        c = grid.cells
+        assert len(c) >= tex.n_voxels
+        np.testing.assert_array_equal(c[: tex.n_voxels], tex.coords + GRID_PAD)
+        assert len(np.unique(c, axis=0)) == len(c)
         dense = np.full(shape[::-1], -1, dtype=np.int64)  # z, y, x
-        c = tex.coords.astype(np.int64)
-        dense[c[:, 2], c[:, 1], c[:, 0]] = np.arange(tex.n_voxels)
+        dense[c[:, 2], c[:, 1], c[:, 0]] = np.arange(len(c))
         bricks = -(-shape // BRICK)
         pad = np.full(bricks[::-1] * BRICK, -1, dtype=np.int64)
         pad[: shape[2], : shape[1], : shape[0]] = dense

@@ -1,0 +1,161 @@
+"""The volume renderer's surface sheets shaded by their linear models across
+their planes (``shading="smooth"``, the default) or with their voxels' values
+("flat"), on every corpus scene.
+
+Per scene, at the corpus bench's two cameras (``aniso3d render``'s view:
+*close*, the object filling the image, and *minified*, a voxel about a
+pixel), both drawn by the volume renderer and compared with the polygons at
+8 x 8 samples inside the object's box, as the corpus bench does:
+
+- PSNR (dB) and FLIP of the RGB image;
+- ``inside err``: mean |RGB - truth RGB| (1/255) over the pixels the truth
+  covers whole, eroded by 2 pixels (the shading, away from silhouettes);
+- frame time: median and [fastest-slowest] of ``--frames`` frames, the two
+  modes taken in turn frame by frame (``Renderer.last_frame_seconds``).
+
+    .venv/bin/python demos/bench_volume_shading.py [SCENE ...] [--size 512]
+        [--frames 5] [--md docs/coverage.md]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+
+import numpy as np
+
+from aniso3d import metrics
+from aniso3d.bench.corpus import corpus_cameras
+from aniso3d.bench.outputs import markdown_table, write_between_markers
+from aniso3d.bench.run import code_version
+from aniso3d.build import scenes
+from aniso3d.build.texture import build_texture
+from aniso3d.rendering.context import GLContext
+from aniso3d.rendering.renderer import Renderer
+from aniso3d.rendering.volume import SHADING_MODES
+
+BEGIN = "<!-- bench_volume_shading: begin -->"
+END = "<!-- bench_volume_shading: end -->"
+#: The mode measured against ("flat") first, then the default.
+MODES = tuple(reversed(SHADING_MODES))
+
+
+def eroded(mask: np.ndarray, k: int) -> np.ndarray:
+    """``mask`` with every pixel within ``k`` of its outside removed (a square)."""
+    out = mask.copy()
+    for axis in (0, 1):
+        for s in range(-k, k + 1):
+            out &= np.roll(mask, s, axis=axis)
+    return out
+
+
+def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
+    mesh = scenes.get_scene(name)
+    tex = build_texture(mesh, args.resolution, args.directions)
+    size = (args.size, args.size)
+    rows = []
+    for spec in corpus_cameras(mesh, size, args.resolution):
+        x0, y0, x1, y1 = spec.crop
+        truth = renderer.render(mesh, spec.camera, "mesh", ssaa=args.gt_ssaa, alpha=True)
+        ref = truth[y0:y1, x0:x1]
+        inside = eroded(ref[..., 3] == 255, 2)
+        row = {"scene": name, "camera": spec.label, "voxel_px": spec.voxel_px, "inside_px": int(inside.sum())}
+        for mode in MODES:
+            img = renderer.render(tex, spec.camera, "volume", alpha=True, shading=mode)[y0:y1, x0:x1]
+            m = metrics.compare(ref[..., :3], img[..., :3], with_flip=True)
+            err = np.abs(img[..., :3].astype(np.float64) - ref[..., :3]).mean(axis=-1)
+            inside_err = float(err[inside].mean()) if inside.any() else float("nan")
+            row[mode] = {"psnr": m["psnr"], "flip": m["flip"], "inside_err": inside_err, "times": []}
+        for _ in range(args.frames):  # the modes in turn: both see the same load
+            for mode in MODES:
+                renderer.render(tex, spec.camera, "volume", shading=mode)
+                row[mode]["times"].append(renderer.last_frame_seconds)
+        rows.append(row)
+        f, s = row["smooth"], row["flat"]
+        print(f"  {spec.label}: PSNR {s['psnr']:.2f} -> {f['psnr']:.2f}, FLIP {s['flip']:.4f} -> "
+              f"{f['flip']:.4f}, inside err {s['inside_err']:.2f} -> {f['inside_err']:.2f}", flush=True)  # fmt: skip
+    return rows
+
+
+def ms(times: list[float]) -> str:
+    t = 1000 * np.asarray(times)
+    return f"{np.median(t):.0f} [{t.min():.0f}-{t.max():.0f}]"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("scenes", nargs="*", default=list(scenes.CORPUS))
+    ap.add_argument("--size", type=int, default=512)
+    ap.add_argument("--gt-ssaa", type=int, default=8)
+    ap.add_argument("--resolution", type=int, default=128)
+    ap.add_argument("--directions", type=int, default=16)
+    ap.add_argument("--frames", type=int, default=5)
+    ap.add_argument("--md", default="", help="Markdown file to write the table into (between its markers)")
+    args = ap.parse_args()
+
+    started, load0 = time.time(), os.getloadavg()
+    # The code measured: the commit checked out when the run starts, and
+    # whether the code (not the docs being edited) differed from it.
+    version = code_version(("aniso3d", "shaders", "demos"))
+    commit = (version["commit"] or "unknown")[:7]
+    commit += " (with uncommitted changes to the code)" if version["dirty"] else ""
+    rows = []
+    with GLContext("auto") as gl, Renderer((args.size, args.size), gl=gl) as renderer:
+        gl_name = gl.renderer
+        for name in args.scenes:
+            print(f"{name}:", flush=True)
+            rows += run_scene(name, args, renderer)
+    load1, minutes = os.getloadavg(), (time.time() - started) / 60
+
+    table = []
+    for r in rows:
+        s, f = r["flat"], r["smooth"]
+        table.append([r["scene"], r["camera"], f"{r['voxel_px']:.2f}",
+                      f"{s['psnr']:.2f} / {s['flip']:.4f}", f"{f['psnr']:.2f} / {f['flip']:.4f}",
+                      f"{f['psnr'] - s['psnr']:+.2f}", f"{f['flip'] - s['flip']:+.4f}",
+                      f"{s['inside_err']:.2f}", f"{f['inside_err']:.2f}", ms(s["times"]), ms(f["times"])])  # fmt: skip
+    summary = []
+    for cam in ("close", "minified"):
+        d = [r["smooth"]["psnr"] - r["flat"]["psnr"] for r in rows if r["camera"] == cam]
+        df = [r["smooth"]["flip"] - r["flat"]["flip"] for r in rows if r["camera"] == cam]
+        tr = [np.median(r["smooth"]["times"]) / np.median(r["flat"]["times"]) for r in rows if r["camera"] == cam]
+        if d:
+            summary.append([cam, f"{np.mean(d):+.2f}", f"{min(d):+.2f}", f"{max(d):+.2f}", f"{np.mean(df):+.4f}",
+                            f"{max(df):+.4f}", f"{np.median(tr):.2f} [{min(tr):.2f}-{max(tr):.2f}]"])  # fmt: skip
+    parts = [
+        BEGIN,
+        f"Run {time.strftime('%Y-%m-%d %H:%M')} at commit {commit} in {minutes:.1f} min on {gl_name}, "
+        f"{platform.machine()}, {os.cpu_count()} CPUs, load average (1, 5, 15 min) "
+        f"{load0[0]:.1f} {load0[1]:.1f} {load0[2]:.1f} at the start and {load1[0]:.1f} {load1[1]:.1f} "
+        f"{load1[2]:.1f} at the end; `demos/bench_volume_shading.py {' '.join(args.scenes)} --size {args.size} "
+        f"--frames {args.frames}`. Texture {args.resolution}^3, K = {args.directions}; truth "
+        f"{args.gt_ssaa}x{args.gt_ssaa} polygons; errors inside the object's box, as the corpus bench. "
+        "The images are deterministic, so PSNR, FLIP and the inside error have no spread; frame times are "
+        "the median [fastest-slowest] of the frames, the two modes drawn in turn.",
+        "",
+        "**Per scene**: PSNR (dB) / FLIP of the volume with its sheets shaded with their voxels' values "
+        "(`flat`) and by their linear models (`smooth`, the default), their difference (PSNR: positive is "
+        "better; FLIP: negative is better), the mean RGB error (1/255) over the pixels the truth covers "
+        "whole, eroded by 2, and the frame time (ms).",
+        "",
+        markdown_table(["scene", "camera", "voxel px", "flat", "smooth", "Δ PSNR", "Δ FLIP",
+                        "inside err flat", "inside err smooth", "ms flat", "ms smooth"], table),  # fmt: skip
+        "",
+        "**Over the corpus** (smooth - flat; PSNR dB: mean, worst, best; FLIP: mean, worst; frame "
+        "time ratio smooth / flat: median [range] over the scenes):",
+        "",
+        markdown_table(["camera", "mean Δ PSNR", "worst", "best", "mean Δ FLIP", "worst Δ FLIP", "time ratio"],
+                       summary),  # fmt: skip
+        END,
+    ]
+    block = "\n".join(parts)
+    print("\n" + block)
+    if args.md:
+        path = write_between_markers(args.md, block, BEGIN, END, title="# Volume shading\n\n")
+        print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
