@@ -7,6 +7,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import math
 import re
 import zipfile
 from pathlib import Path
@@ -21,7 +22,7 @@ from aniso3d.build import encoding as enc
 from aniso3d.build.encoding import ARRAYS, DEFAULT_BITS, Bits, facet_density
 from aniso3d.build.pyramid import pyramid
 from aniso3d.build.texture import QUANTISED
-from aniso3d.build.texture_file import FORMAT_VERSION, read_texture_file
+from aniso3d.build.texture_file import FORMAT_VERSION, encoded_size, read_texture_file
 
 DATA = Path(__file__).resolve().parent / "data"
 
@@ -250,7 +251,13 @@ def assert_within_bounds(tex: AnisoTexture, got: AnisoTexture, bits: Bits = DEFA
     n, n2 = tex.entry_normal.astype(np.float64), got.entry_normal.astype(np.float64)
     length = np.linalg.norm(n, axis=1)
     bound = max(3 / (np.sqrt(2) * m_oct), np.tan(np.radians(enc.FRAME_MAX_ANGLE)) / (np.sqrt(2) * m))
-    assert angle_between(n, n2).max(initial=0) <= bound + 1e-6
+    # version 5: a spread mean normal (length c < 1) within NORMAL_SPREAD_SHARE
+    # of its facets' spread sqrt(2 (1 - c)), as its length code gives it
+    # (sqrt(1 - c) to half a code)
+    code_spread = np.sqrt(np.clip(1 - np.minimum(length, 1), 0, 1)) + 1 / (2 * (2**bits.coherence - 1))
+    sigma = np.sqrt(2) * code_spread
+    assert np.all(angle_between(n, n2) <= np.maximum(bound, enc.NORMAL_SPREAD_SHARE * sigma) + 1e-6)
+    assert angle_between(n, n2)[length >= 1 - 1e-7].max(initial=0) <= bound + 1e-6
     # length c: sqrt(1 - c) within half a step (float32 normals: |n| to 1e-7,
     # so sqrt(1 - c) to 3e-4), c within a step, 1 exact
     ell = np.minimum(length, 1)
@@ -264,14 +271,18 @@ def assert_within_bounds(tex: AnisoTexture, got: AnisoTexture, bits: Bits = DEFA
     # point farther from the original, inside it): half a step each
     _, s_depth = enc._steps(bits.depth)
     _, s_plane = enc._steps(bits.centroid)
+    # version 5: a spread entry's depth within DEPTH_SPREAD_SHARE of how far its
+    # facets lie off its plane, about sigma / 2 voxel
+    half_depth = np.maximum(1 / (2 * s_depth), enc.DEPTH_SPREAD_SHARE * sigma / 2)
     err = np.linalg.norm(got.entry_centroid - tex.entry_centroid, axis=1) / h
-    assert np.max(err, initial=0) <= np.sqrt(1 / (2 * s_depth) ** 2 + 2 / (2 * s_plane) ** 2) * (1 + 1e-9)
+    assert np.all(err <= np.sqrt(half_depth**2 + 2 / (2 * s_plane) ** 2) * (1 + 1e-9))
     # along the decoded normal, where the clamp left the point alone: half a depth step
     f2 = (got.entry_centroid - tex.origin) / h - tex.coords[tex.entry_voxel]
     inside = np.all((f2 > 1e-9) & (f2 < 1 - 1e-9), axis=1) & (ell > 0)
     unit2 = n2 / np.maximum(np.linalg.norm(n2, axis=1, keepdims=True), 1e-300)
     depth_err = np.abs(np.sum((got.entry_centroid - tex.entry_centroid) * unit2, axis=1))[inside] / h
-    assert np.max(depth_err, initial=0) <= (1 / (2 * s_depth)) * (1 + 1e-4) + 1e-6
+    assert np.all(depth_err <= half_depth[inside] * (1 + 1e-4) + 1e-6)
+    assert np.max(depth_err[length[inside] >= 1 - 1e-7], initial=0) <= (1 / (2 * s_depth)) * (1 + 1e-4) + 1e-6
     # materials: steps of at most S / (2**bits - 1), ends exact
     for name, log in (("entry_kd", False), ("entry_ks", False), ("entry_shininess", True)):
         x = getattr(tex, name).astype(np.float64).reshape(len(a), -1)
@@ -306,7 +317,7 @@ def assert_within_bounds(tex: AnisoTexture, got: AnisoTexture, bits: Bits = DEFA
 def test_tree_through_a_file_is_within_every_bound(tree_tex, tree_file):
     back = AnisoTexture.load(tree_file)
     f = read_texture_file(tree_file)
-    assert f.version == FORMAT_VERSION == 4 and f.encoding == "compact"
+    assert f.version == FORMAT_VERSION == 5 and f.encoding == "compact"
     with zipfile.ZipFile(tree_file) as zf:
         assert {i.compress_type for i in zf.infolist() if i.filename.endswith(".npy")} == {zipfile.ZIP_LZMA}
     # the file holds exactly what as_stored() computes without one
@@ -314,7 +325,7 @@ def test_tree_through_a_file_is_within_every_bound(tree_tex, tree_file):
     for name in ARRAYS:
         a, b = getattr(back, name), getattr(ref, name)
         assert a.dtype == b.dtype and np.array_equal(a, b), name
-    assert back.meta == {**tree_tex.meta, QUANTISED: 4} and back.voxel_size == tree_tex.voxel_size
+    assert back.meta == {**tree_tex.meta, QUANTISED: 5} and back.voxel_size == tree_tex.voxel_size
     assert_within_bounds(tree_tex, back)
 
 
@@ -331,7 +342,10 @@ def test_more_bits_cost_more_bytes_and_err_less(tree_tex, tmp_path):
     fine = Bits(area=16, normal=16, centroid=12, depth=12, kd=12, density=12)
     sizes = [tree_tex.save(tmp_path / f"{i}.a3d", bits=b).stat().st_size for i, b in enumerate((Bits(), fine))]
     assert sizes[0] < sizes[1]
-    errs = [np.abs(tree_tex.as_stored(b).entry_centroid - tree_tex.entry_centroid).max() for b in (Bits(), fine)]
+    # on entries of flat facets (a spread entry's steps follow its spread, version 5)
+    flat = np.linalg.norm(tree_tex.entry_normal, axis=1) >= 1 - 1e-7
+    assert 0.3 < flat.mean() < 1
+    errs = [np.abs(tree_tex.as_stored(b).entry_centroid - tree_tex.entry_centroid)[flat].max() for b in (Bits(), fine)]
     assert errs[1] < errs[0] / 8
 
 
@@ -492,7 +506,14 @@ def _set(name, fn):
 
 
 DAMAGED = [
-    ("future version", dict(header=lambda h: h.update(version=5)), "version 5.*Upgrade aniso3d.*aniso3d build"),
+    ("future version", dict(header=lambda h: h.update(version=6)), "version 6.*Upgrade aniso3d.*aniso3d build"),
+    ("normal shifts short", dict(header=lambda h: h["params"].update(normal_shifts=[0, 1])), "normal_shifts"),
+    ("normal shift too coarse", dict(header=lambda h: h["params"]["normal_shifts"].__setitem__(5, 15)),
+     "normal_shifts"),
+    ("depth shifts missing", dict(header=lambda h: h["params"].pop("depth_shifts")), "depth_shifts"),
+    ("normal past its spread's range",
+     dict(header=lambda h: h["params"].update(normal_shifts=[8] * len(h["params"]["normal_shifts"]))),
+     "entry_normal holds codes past"),
     ("unknown encoding", dict(header=lambda h: h.update(encoding="zstd")), "encoding 'zstd'.*Upgrade aniso3d"),
     ("params not an object", dict(header=lambda h: h.update(params=[1])), "params is not an object"),
     ("bits missing", dict(header=lambda h: h["params"].pop("bits")), "encoding parameters are damaged"),
@@ -605,10 +626,12 @@ def test_copying_from_a_neighbour_loses_nothing(tree_tex):
     sample = tree_tex.directions[tree_tex.entry_direction]
     unit = np.where((length > 0)[:, None], n / np.where(length > 0, length, 1)[:, None], sample)
     span = params["normal_frame_span"]
-    nc = enc._encode_frame(unit, sample, DEFAULT_BITS.normal, span) if span is not None else enc._encode_oct(
-        unit, enc.oct_bits(DEFAULT_BITS))
     cc = enc._encode_spread(np.minimum(length, 1.0), DEFAULT_BITS.coherence)
-    alone = enc._decode_normal(nc, cc, None, DEFAULT_BITS, span, sample)
+    shift = np.asarray(enc.normal_shifts(DEFAULT_BITS, span))[cc[0]]
+    assert params["normal_shifts"] == enc.normal_shifts(DEFAULT_BITS, span) and np.mean(shift > 0) > 0.05
+    nc = enc._encode_frame(unit, sample, DEFAULT_BITS.normal - shift, span) if span is not None else enc._encode_oct(
+        unit, enc.oct_bits(DEFAULT_BITS) - shift)
+    alone = enc._decode_normal(nc, cc, None, DEFAULT_BITS, span, sample, shift=shift)
     np.testing.assert_array_equal(got.entry_normal, alone)
     # and each entry with a parent has the same codes as the neighbour it names
     voxel = tree_tex.entry_voxel
@@ -672,3 +695,68 @@ def test_centroid_frame_steps_cover_the_voxel_and_keep_its_middle_and_faces(bits
     exact = slice(None) if bits > 2 else slice(0, 1)  # 2 bits: the middle only
     np.testing.assert_allclose(got[exact, 0], f[exact, 0], atol=1e-15)
     np.testing.assert_allclose(got[:, 1:], f[:, 1:], atol=1e-15)
+
+
+def test_version_4_compact_file_still_loads():
+    """tests/data/small_tree_v4.a3d was written by the version 4 writer (every
+    direction and depth at the field's bits, no shift tables), and
+    small_tree_v4_decoded.a3d (exact encoding) holds what that writer's
+    decoder gave for it: version 5's decoder must give exactly those arrays."""
+    f = read_texture_file(DATA / "small_tree_v4.a3d")
+    assert f.version == 4 and f.encoding == "compact"
+    with zipfile.ZipFile(DATA / "small_tree_v4.a3d") as zf:
+        params = json.loads(zf.read("header.json"))["params"]
+    assert "normal_shifts" not in params and "depth_shifts" not in params
+    ref = read_texture_file(DATA / "small_tree_v4_decoded.a3d")
+    assert ref.version == 4 and ref.encoding == "exact"
+    for name in ARRAYS:
+        a, b = f.arrays[name], ref.arrays[name]
+        assert a.dtype == b.dtype and a.shape == b.shape, name
+        np.testing.assert_array_equal(a, b, err_msg=name)
+    back = AnisoTexture.load(DATA / "small_tree_v4.a3d")
+    assert back.meta[QUANTISED] == 4 and back.meta["source"] == "v4-fixture"
+    # and today's encoding of the same texture is a version 5 one, with shifts
+    members, params = enc.encode(dict(ref.arrays), ref.voxel_size)
+    assert max(params["normal_shifts"]) > 0 and max(params["depth_shifts"]) > 0
+
+
+@pytest.mark.parametrize("bits", [DEFAULT_BITS, Bits(normal=6, depth=6, coherence=3), Bits(normal=16, depth=16)])
+@pytest.mark.parametrize("span", [None, 0.8, 1.7])
+def test_spread_normals_get_the_coarsest_step_within_their_share(bits, span):
+    """Per length code q, the direction's and the depth's shift: 0 for flat
+    facets (q = 0); otherwise the coarsest step whose error stays within the
+    share of the facets' spread sigma = sqrt(2) q / (2**bits - 1), checked
+    against the closed-form errors (the next coarser step would exceed it,
+    or the codes are down to 2 bits)."""
+    full = bits.normal if span is not None else enc.oct_bits(bits)
+    top = 2**bits.coherence - 1
+    shifts, dshifts = enc.normal_shifts(bits, span), enc.depth_shifts(bits)
+    assert len(shifts) == len(dshifts) == top + 1 and shifts[0] == dshifts[0] == 0
+    assert np.all(np.diff(shifts) >= 0) and np.all(np.diff(dshifts) >= 0) and shifts[-1] > 0 and dshifts[-1] > 0
+    m = lambda b: 2 ** (b - 1) - 1  # noqa: E731
+    err = lambda b: (3.0 if span is None else span) / (np.sqrt(2) * m(b))  # noqa: E731
+    derr = lambda b: 1 / (2 * max(1, 2 * math.floor(m(b) / math.sqrt(3))))  # noqa: E731
+    for q in range(top + 1):
+        sigma = np.sqrt(2) * q / top
+        for s, e, b, share in ((shifts[q], err, full, enc.NORMAL_SPREAD_SHARE),
+                               (dshifts[q], derr, bits.depth, enc.DEPTH_SPREAD_SHARE / 2)):  # fmt: skip
+            assert s == 0 or e(b - s) <= share * sigma
+            assert b - s == 2 or e(b - s - 1) > share * sigma
+
+
+def test_spread_entries_make_the_file_smaller_and_flat_ones_keep_their_codes(tree_tex, monkeypatch):
+    """The shifts pay: the tree's file without them (shares 0) is larger;
+    entries of flat facets decode to the same values either way."""
+    arrays = {n: getattr(tree_tex, n) for n in ARRAYS}
+    with_shifts = tree_tex.as_stored()
+    size = encoded_size(arrays, tree_tex.voxel_size, {})
+    monkeypatch.setattr(enc, "NORMAL_SPREAD_SHARE", 0.0)
+    monkeypatch.setattr(enc, "DEPTH_SPREAD_SHARE", 0.0)
+    members, params = enc.encode(arrays, tree_tex.voxel_size)
+    assert not any(params["normal_shifts"]) and not any(params["depth_shifts"])
+    without = tree_tex.as_stored()
+    assert size < 0.98 * encoded_size(arrays, tree_tex.voxel_size, {})
+    flat = np.linalg.norm(tree_tex.entry_normal, axis=1) >= 1 - 1e-7
+    for name in ("entry_normal", "entry_centroid", "entry_area", "entry_kd"):
+        np.testing.assert_array_equal(getattr(with_shifts, name)[flat], getattr(without, name)[flat], err_msg=name)
+    assert not np.array_equal(with_shifts.entry_normal[~flat], without.entry_normal[~flat])

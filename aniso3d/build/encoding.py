@@ -285,21 +285,32 @@ def _decode_log(codes: np.ndarray, bits: int, span: list[float]) -> np.ndarray:
     return np.where(codes > 0, value, 0.0)
 
 
-def _encode_oct(v: np.ndarray, bits: int) -> np.ndarray:
+def _half(bits) -> np.ndarray | int:
+    """``2**(bits-1) - 1``, the steps a side of a signed coordinate of ``bits``
+    bits (an int, or an array of one per entry)."""
+    if np.ndim(bits):
+        return (np.left_shift(1, np.asarray(bits, dtype=np.int64) - 1) - 1).astype(np.float64)
+    return 2 ** (bits - 1) - 1
+
+
+def _encode_oct(v: np.ndarray, bits) -> np.ndarray:
     """(2, E) codes of unit vectors ``v`` (E, 3) on the octahedron, each
     coordinate rounded symmetrically to ``2**(bits-1) - 1`` steps a side (so
-    0 and +-1, the axes, are exact)."""
+    0 and +-1, the axes, are exact). ``bits`` is one count or one per entry
+    (version 5: coarser for spread normals, :func:`normal_shifts`)."""
     v = np.asarray(v, dtype=np.float64)
     s = np.abs(v).sum(axis=1)
     p = v[:, :2] / np.where(s > 0, s, 1.0)[:, None]
     sign = np.where(p >= 0, 1.0, -1.0)
     p = np.where((v[:, 2] < 0)[:, None], (1.0 - np.abs(p[:, ::-1])) * sign, p)
-    m = 2 ** (bits - 1) - 1
+    m = _half(bits)
+    m = m[:, None] if np.ndim(m) else m
     return (np.round(np.clip(p, -1.0, 1.0) * m) + m).astype(np.uint16).T
 
 
-def _decode_oct(codes: np.ndarray, bits: int) -> np.ndarray:
-    m = 2 ** (bits - 1) - 1
+def _decode_oct(codes: np.ndarray, bits) -> np.ndarray:
+    m = _half(bits)
+    m = m[:, None] if np.ndim(m) else m
     p = (codes.T.astype(np.float64) - m) / m
     z = 1.0 - np.abs(p).sum(axis=1)
     sign = np.where(p >= 0, 1.0, -1.0)
@@ -308,25 +319,26 @@ def _decode_oct(codes: np.ndarray, bits: int) -> np.ndarray:
     return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
-def _encode_frame(v: np.ndarray, sample: np.ndarray, bits: int, span: float) -> np.ndarray:
+def _encode_frame(v: np.ndarray, sample: np.ndarray, bits, span: float) -> np.ndarray:
     """(2, E) codes of unit vectors ``v`` (E, 3) as the point where they meet
     the plane tangent to their sample direction ``sample`` (E, 3) at distance 1
     (gnomonic coordinates along :func:`~aniso3d.grid.tangent_frame`), each
     rounded to ``2**(bits-1) - 1`` steps on ``[-span, span]``. Needs
     ``v . sample > 0``; registration puts every mean normal inside its sample
-    direction's Voronoi cell, so the coordinates stay small."""
+    direction's Voronoi cell, so the coordinates stay small. ``bits`` is one
+    count or one per entry."""
     t, b = tangent_frame(sample)
     c = np.sum(v * sample, axis=1)
     g = np.stack([np.sum(v * t, axis=1), np.sum(v * b, axis=1)]) / c
-    m = 2 ** (bits - 1) - 1
+    m = _half(bits)
     scaled = g / span if span > 0 else np.zeros_like(g)
     return (np.round(np.clip(scaled, -1.0, 1.0) * m) + m).astype(np.uint16)
 
 
-def _decode_frame(codes: np.ndarray, sample: np.ndarray, bits: int, span: float, frame=None) -> np.ndarray:
+def _decode_frame(codes: np.ndarray, sample: np.ndarray, bits, span: float, frame=None) -> np.ndarray:
     """The inverse of :func:`_encode_frame`; ``frame`` is ``tangent_frame(sample)``
     when already known (a sample direction's rows, gathered)."""
-    m = 2 ** (bits - 1) - 1
+    m = _half(bits)
     g = (codes.astype(np.float64) - m) / m * span
     t, b = tangent_frame(sample) if frame is None else frame
     v = sample + g[0][:, None] * t + g[1][:, None] * b
@@ -359,11 +371,74 @@ def _deflated(codes: np.ndarray, bits: int) -> int:
 
 
 def _decode_unit_normal(codes: np.ndarray, bits: Bits, span: float | None, sample: np.ndarray,
-                        frame=None) -> np.ndarray:  # fmt: skip
-    """(E, 3) float64 unit normals from their direction codes (2, E)."""
+                        frame=None, shift: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+    """(E, 3) float64 unit normals from their direction codes (2, E), each
+    ``shift`` (E,) bits coarser than ``bits`` say (version 5; None: 0)."""
+    nb = oct_bits(bits) if span is None else bits.normal
+    if shift is not None:
+        nb = nb - np.asarray(shift, dtype=np.int64)
     if span is None:
-        return _decode_oct(codes, oct_bits(bits))
-    return _decode_frame(codes, sample, bits.normal, span, frame)
+        return _decode_oct(codes, nb)
+    return _decode_frame(codes, sample, nb, span, frame)
+
+
+#: A spread mean normal's direction is stored no finer than this fraction of
+#: its facets' angular spread about it (:func:`normal_shifts`).
+NORMAL_SPREAD_SHARE = 1 / 16
+
+
+def direction_error(bits: int, span: float | None) -> float:
+    """The largest angle (radians) between a unit normal and its direction
+    codes of ``bits`` bits decoded: half a step on each of two coordinates,
+    about the sample direction (gnomonic, ``span``; an angle is never larger
+    than its gnomonic offset) or octahedral (``span`` None; the map
+    stretches by at most 3)."""
+    return (3.0 if span is None else span) / (math.sqrt(2.0) * (2 ** (bits - 1) - 1))
+
+
+#: A spread entry's centroid depth is stored no finer than this fraction of
+#: how far its facets lie off its plane (:func:`depth_shifts`).
+DEPTH_SPREAD_SHARE = 1 / 16
+
+
+def depth_shifts(bits: Bits) -> list[int]:
+    """Per normal-length code q, how many bits coarser than ``bits.depth``
+    a centroid's depth is stored (version 5). Facets whose normals spread by
+    sigma about their mean (:func:`normal_shifts`) across a voxel lie up to
+    about ``sigma h / 2`` off the plane through their centroid: the plane
+    stands for them only that well, and its depth is kept within
+    ``DEPTH_SPREAD_SHARE`` of that (never coarser than 2 bits)."""
+    return _coarsest(bits.depth, lambda b: 1 / (2 * _steps(b)[1]), DEPTH_SPREAD_SHARE / 2, bits.coherence)
+
+
+def _by_shift(shift: np.ndarray) -> np.ndarray:
+    """The order in which version 5 stores direction codes: grouped by ``shift``, stable."""
+    return np.argsort(shift, kind="stable")
+
+
+def normal_shifts(bits: Bits, span: float | None) -> list[int]:
+    """Per normal-length code q (:func:`_encode_spread`), how many bits
+    coarser than the field's the direction of a mean normal of that length
+    is stored (version 5). A mean normal of length c averages facets whose
+    normals spread about it by about ``sigma = sqrt(2 (1 - c))`` radians (two
+    facets sigma either side: exactly, to first order; a cone: its RMS
+    angle), a spread that the volume's sheets bend by and the shading
+    averages over. Its direction is kept within ``NORMAL_SPREAD_SHARE``
+    sigma (and never coarser than 2 bits): most entries of scattered
+    foliage mix leaves of unrelated directions and need far fewer bits;
+    flat and smooth surfaces (q = 0, or a few) keep all of theirs."""
+    full = oct_bits(bits) if span is None else bits.normal
+    return _coarsest(full, lambda b: direction_error(b, span), NORMAL_SPREAD_SHARE, bits.coherence)
+
+
+def _coarsest(full: int, error, share: float, coherence_bits: int) -> list[int]:
+    """Per length code q, the most bits below ``full`` (down to 2) whose
+    ``error(bits)`` stays within ``share`` times the spread of that code,
+    ``sqrt(2) q / (2**coherence_bits - 1)`` (``error`` grows as bits drop)."""
+    top = 2**coherence_bits - 1
+    sigma = math.sqrt(2.0) * np.arange(top + 1) / top
+    err = np.array([error(b) for b in range(full - 1, 1, -1)])  # shifts 1, 2, ... (at most 15)
+    return np.sum(err[None, :] <= share * sigma[:, None], axis=1).tolist()
 
 
 def _encode_spread(length: np.ndarray, bits: int) -> np.ndarray:
@@ -391,15 +466,17 @@ def _decode_normal(
     span: float | None,
     sample: np.ndarray | None,
     unit: np.ndarray | None = None,
+    shift: np.ndarray | None = None,
 ) -> np.ndarray:
     """(E, 3) float32 mean normals from their direction codes (2, E), in the
     sample frame (``span``) or octahedral (``span`` None), or their unit
     directions ``unit`` when already decoded, and length codes (1, E): of
     :func:`_encode_spread` when ``length_range`` is None (version 3), else
     on ``length_range`` (version 2). float32 as built; F is computed from
-    these very values by encoder and decoder, so that decoded D >= F exactly."""
+    these very values by encoder and decoder, so that decoded D >= F exactly.
+    ``shift``: see :func:`_decode_unit_normal`."""
     if unit is None:
-        unit = _decode_unit_normal(codes, bits, span, sample)
+        unit = _decode_unit_normal(codes, bits, span, sample, shift=shift)
     if length_range is None:
         scale = _decode_spread(length, bits.coherence)
     else:
@@ -489,16 +566,21 @@ def _steps(bits: int) -> tuple[int, int]:
     half diagonal), ``m = 2**(bits-1) - 1`` and ``s`` the largest even number
     with ``s sqrt(3)/2 <= m``: 0 and +-1/2 (the voxel's middle and faces)
     are exact. (2 bits: ``s = 1``, codes -1, 0, 1 voxel, clamped into it.)"""
+    if np.ndim(bits):  # one count per entry (version 5's coarser depths)
+        m = np.left_shift(1, np.asarray(bits, dtype=np.int64) - 1) - 1
+        return m, np.maximum(1, 2 * np.floor(m / math.sqrt(3.0)).astype(np.int64))
     m = 2 ** (bits - 1) - 1
     return m, max(1, 2 * math.floor(m / math.sqrt(3.0)))
 
 
-def _frame_offsets(codes: np.ndarray, unit: np.ndarray, t: np.ndarray, b: np.ndarray, bits: Bits) -> np.ndarray:
+def _frame_offsets(codes: np.ndarray, unit: np.ndarray, t: np.ndarray, b: np.ndarray, bits: Bits,
+                   depth_bits=None) -> np.ndarray:  # fmt: skip
     """(E, 3) offsets from the voxel centre, in voxels, of centroid codes
     (3, E) (depth along the unit normal, then the two tangent coordinates
     along ``t`` and ``b``, :func:`~aniso3d.grid.tangent_frame` of it),
-    clamped into the voxel."""
-    md, sd = _steps(bits.depth)
+    clamped into the voxel. ``depth_bits``: the depth codes' bits, one per
+    entry (version 5), else ``bits.depth``."""
+    md, sd = _steps(bits.depth if depth_bits is None else depth_bits)
     mp, sp = _steps(bits.centroid)
     d = (codes[0].astype(np.float64) - md) / sd
     u = (codes[1].astype(np.float64) - mp) / sp
@@ -506,13 +588,14 @@ def _frame_offsets(codes: np.ndarray, unit: np.ndarray, t: np.ndarray, b: np.nda
     return np.clip(d[:, None] * unit + u[:, None] * t + v[:, None] * b, -0.5, 0.5)
 
 
-def _depth_codes(f: np.ndarray, unit: np.ndarray, bits: int) -> np.ndarray:
+def _depth_codes(f: np.ndarray, unit: np.ndarray, bits) -> np.ndarray:
     """Depth codes (E,) int64 of offsets ``f`` (E, 3) from the voxel centre along ``unit`` (E, 3)."""
     m, s = _steps(bits)
     return m + np.clip(np.round(np.sum(f * unit, axis=1) * s), -m, m).astype(np.int64)
 
 
-def _encode_centroid_frame(centroid, origin, voxel_size, coords, voxel, unit, parent_src, bits) -> np.ndarray:
+def _encode_centroid_frame(centroid, origin, voxel_size, coords, voxel, unit, parent_src, bits,
+                           depth_bits=None) -> np.ndarray:  # fmt: skip
     """(3, E) codes of each centroid in its entry's normal frame (version 3):
     its offset from the voxel centre along the decoded unit normal ``unit``
     (``bits.depth`` bits, within h sqrt(3) / 4 s), and in the plane
@@ -521,41 +604,51 @@ def _encode_centroid_frame(centroid, origin, voxel_size, coords, voxel, unit, pa
     in its plane. An entry with a parent (``parent_src``, its source entry, is
     not itself) lies on its source's plane when their facets are coplanar
     (a leaf across voxels): its depth is stored as the difference, modulo
-    ``2**bits.depth``, from the depth of that plane in its voxel."""
+    ``2**bits.depth``, from the depth of that plane in its voxel.
+    ``depth_bits`` (E,): each entry's depth bits (version 5: fewer for
+    spread normals, :func:`depth_shifts`; a child has its source's), else
+    ``bits.depth``."""
     f = (np.asarray(centroid, dtype=np.float64) - origin) / voxel_size - coords[voxel] - 0.5
     f = np.clip(f, -0.5, 0.5)
     mp, sp = _steps(bits.centroid)
     t, b = tangent_frame(unit)
+    db = np.full(len(f), bits.depth, dtype=np.int64) if depth_bits is None else np.asarray(depth_bits, np.int64)
     codes = np.empty((3, len(f)), dtype=np.int64)
-    codes[0] = _depth_codes(f, unit, bits.depth)
+    codes[0] = _depth_codes(f, unit, db)
     codes[1] = mp + np.clip(np.round(np.sum(f * t, axis=1) * sp), -mp, mp)
     codes[2] = mp + np.clip(np.round(np.sum(f * b, axis=1) * sp), -mp, mp)
     child = np.flatnonzero(parent_src != np.arange(len(f)))
     if len(child):
         root = parent_src[child]
         # The sources' centroids as decoded, seen from each child's voxel.
-        at = _frame_offsets(codes[:, root], unit[root], t[root], b[root], bits)
+        at = _frame_offsets(codes[:, root], unit[root], t[root], b[root], bits, db[root])
         at += coords[voxel[root]] - coords[voxel[child]]
-        codes[0, child] = (codes[0, child] - _depth_codes(at, unit[child], bits.depth)) % 2**bits.depth
+        dc = db[child]
+        codes[0, child] = (codes[0, child] - _depth_codes(at, unit[child], dc)) % np.left_shift(1, dc)
     return codes.astype(np.uint16)
 
 
-def _decode_centroid_frame(codes, origin, voxel_size, coords, voxel, unit, tb, parent_src, bits) -> np.ndarray:
+def _decode_centroid_frame(codes, origin, voxel_size, coords, voxel, unit, tb, parent_src, bits,
+                           depth_bits=None) -> np.ndarray:  # fmt: skip
     """The inverse of :func:`_encode_centroid_frame`; ``tb`` is
     :func:`~aniso3d.grid.tangent_frame` of ``unit``."""
     t, b = tb
     codes = codes.astype(np.int64)
+    db = np.full(codes.shape[1], bits.depth, dtype=np.int64) if depth_bits is None else depth_bits
+    md, _ = _steps(db)
+    mp, _ = _steps(bits.centroid)
+    if codes.size and (np.any(codes[0] >= np.left_shift(1, db)) or int(codes[1:].max()) > 2 * mp):
+        raise FormatError("entry_centroid holds codes past the voxel")
     child = np.flatnonzero(parent_src != np.arange(codes.shape[1]))
     if len(child):
         root = parent_src[child]
-        at = _frame_offsets(codes[:, root], unit[root], t[root], b[root], bits)
+        at = _frame_offsets(codes[:, root], unit[root], t[root], b[root], bits, db[root])
         at += coords[voxel[root]] - coords[voxel[child]]
-        codes[0, child] = (codes[0, child] + _depth_codes(at, unit[child], bits.depth)) % 2**bits.depth
-    md, _ = _steps(bits.depth)
-    mp, _ = _steps(bits.centroid)
-    if codes.size and (int(codes[0].max()) > 2 * md or int(codes[1:].max()) > 2 * mp):
+        dc = db[child]
+        codes[0, child] = (codes[0, child] + _depth_codes(at, unit[child], dc)) % np.left_shift(1, dc)
+    if codes.size and np.any(codes[0] > 2 * md):
         raise FormatError("entry_centroid holds codes past the voxel")
-    return origin + (coords[voxel] + 0.5 + _frame_offsets(codes, unit, t, b, bits)) * voxel_size
+    return origin + (coords[voxel] + 0.5 + _frame_offsets(codes, unit, t, b, bits, db)) * voxel_size
 
 
 # ------------------------------------------------------------ copy prediction
@@ -696,20 +789,29 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
     ks_codes, ks_range = _encode_range(arrays["entry_ks"], bits.ks)
     sh_codes, sh_range = _encode_range(arrays["entry_shininess"], bits.shininess, log=True)
     span = _frame_span(unit, sample)
-    normal_codes = _encode_oct(unit, oct_bits(bits))
+    # Spread mean normals' directions are stored coarser (version 5): a shift
+    # per length code, written into params.
+    nb_full = oct_bits(bits)
+    table = normal_shifts(bits, None)
+    shift = np.asarray(table, dtype=np.int64)[coherence_codes[0]]
+    normal_codes = _encode_oct(unit, oct_bits(bits) - shift)
     if span is not None:
         # Smooth surfaces: spatially adjacent normals are adjacent on the
         # octahedral map, and deflate finds that; scattered facets (foliage)
         # take fewer bytes about their sample directions. Keep the smaller.
-        framed = _encode_frame(unit, sample, bits.normal, span)
-        if _deflated(framed, bits.normal) < _deflated(normal_codes, oct_bits(bits)):
-            normal_codes = framed
+        framed_table = normal_shifts(bits, span)
+        framed_shift = np.asarray(framed_table, dtype=np.int64)[coherence_codes[0]]
+        framed = _encode_frame(unit, sample, bits.normal - framed_shift, span)
+        if _deflated(framed[:, _by_shift(framed_shift)], bits.normal) < _deflated(
+                normal_codes[:, _by_shift(shift)], oct_bits(bits)):  # fmt: skip
+            normal_codes, table, shift, nb_full = framed, framed_table, framed_shift, bits.normal
         else:
             span = None
     params = {
         "bits": asdict(bits),
         "area_log2_range": area_span,
         "normal_frame_span": span,
+        "normal_shifts": table,
         "ranges": {"coherence": coherence_range, "kd": kd_range, "ks": ks_range, "shininess": sh_range},
     }
     members = {
@@ -719,7 +821,6 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
         "coords": _encode_keys(coords, shape),
         "entry_mask": _encode_mask(offsets, arrays["entry_direction"], k),
         "entry_area": to_planes(area_codes, _width(bits.area)),
-        "entry_normal": to_planes(normal_codes, _width(bits.normal)),
         "entry_coherence": to_planes(coherence_codes, _width(bits.coherence)),
         "entry_kd": to_planes(kd_codes, _width(bits.kd)),
         "entry_ks": to_planes(ks_codes, _width(bits.ks)),
@@ -731,20 +832,26 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
     parent = _copy_parents(coords, shape, voxel, direction, k, [copied[n] for n in COPIED])
     members["entry_parent"] = parent
     src = _copy_sources(parent, coords, shape, voxel, direction, k)
-    unit_dec = _decode_unit_normal(normal_codes, bits, span, sample)
+    unit_dec = _decode_unit_normal(normal_codes, bits, span, sample, shift=shift)
+    dtable = depth_shifts(bits)
+    params["depth_shifts"] = dtable
+    dshift = np.asarray(dtable, dtype=np.int64)[coherence_codes[0]]
     centroid_codes = _encode_centroid_frame(arrays["entry_centroid"], origin, float(voxel_size), coords, voxel,
-                                            unit_dec, src, bits)  # fmt: skip
-    members["entry_centroid"] = to_planes(centroid_codes, _width(max(bits.centroid, bits.depth)))
+                                            unit_dec, src, bits, bits.depth - dshift)  # fmt: skip
+    members["entry_centroid"] = to_planes(centroid_codes[:, _by_shift(dshift)], _width(max(bits.centroid, bits.depth)))
     roots = parent == 0
     for n in COPIED:
         members[n] = to_planes(np.atleast_2d(copied[n])[:, roots], _width(getattr(bits, _BITS_OF[n])))
+    # Directions grouped by their shift (stable): LZMA then sees codes of one
+    # range at a time, instead of a mixture that hides the coarse ones' savings.
+    members["entry_normal"] = to_planes(normal_codes[:, roots][:, _by_shift(shift[roots])], _width(nb_full))
     cover_codes = _encode_cover(arrays["entry_cover"], bits.cover)
     members["entry_cover"] = cover_codes
     members = {n: members[n] for n in MEMBERS if n in members}
     if bits.density:
         # The residual against F of the *decoded* entries: what decode adds back.
         area = _decode_log(area_codes, bits.area, area_span)
-        nrm = _decode_normal(normal_codes, coherence_codes, None, bits, span, sample)
+        nrm = _decode_normal(normal_codes, coherence_codes, None, bits, span, sample, shift=shift)
         f = facet_density(area * _decode_cover(cover_codes, bits.cover), nrm, offsets, dirs)
         a_v = np.bincount(voxel, weights=area, minlength=len(coords))
         residual = np.asarray(arrays["density"], dtype=np.float64) - f
@@ -762,7 +869,7 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
     return members, params
 
 
-def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, version: int = 4
+def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, version: int = 5
            ) -> dict[str, np.ndarray]:
     """The texture arrays (every name of :data:`ARRAYS`, dtypes as
     :func:`~aniso3d.build.texture.build_texture` makes them) of a compact
@@ -789,6 +896,17 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
         raise FormatError(f"the encoding parameters are damaged ({exc})") from None
     if len(area_span) != 2 or not all(math.isfinite(x) for x in (*area_span, 0.0 if span is None else span)):
         raise FormatError("the encoding parameters are damaged (not finite numbers)")
+    table = None
+    if version >= 5:
+        table = params.get("normal_shifts")
+        full = bits.normal if span is not None else oct_bits(bits)
+        if not (isinstance(table, list) and len(table) == 2**bits.coherence and all(
+                not isinstance(x, bool) and isinstance(x, int) and 0 <= x <= full - 2 for x in table)):
+            raise FormatError("the encoding parameters are damaged (normal_shifts)")
+        dtable = params.get("depth_shifts")
+        if not (isinstance(dtable, list) and len(dtable) == 2**bits.coherence and all(
+                not isinstance(x, bool) and isinstance(x, int) and 0 <= x <= bits.depth - 2 for x in dtable)):
+            raise FormatError("the encoding parameters are damaged (depth_shifts)")
     origin = _shaped(members, "origin", np.float64, (3,))
     shape = _shaped(members, "shape", np.int64, (3,))
     if np.any(shape < 1):
@@ -824,18 +942,32 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
 
     area = _decode_log(codes("entry_area", 1, bits.area)[0], bits.area, area_span)
     nb = bits.normal if span is not None else oct_bits(bits)
+    coherence = codes("entry_coherence", 1, bits.coherence)
+    normal_codes = codes("entry_normal", 2, nb)
+    shift = None
+    if version >= 5:
+        shift = np.asarray(table, dtype=np.int64)[coherence[0]]
+        grouped, normal_codes = normal_codes, np.empty_like(normal_codes)
+        normal_codes[:, _by_shift(shift)] = grouped
+        if normal_codes.size and np.any(normal_codes > 2 * (np.left_shift(1, nb - shift - 1) - 1)):
+            raise FormatError("entry_normal holds codes past their spread's range")
     # tangent frames of the K sample directions, gathered (not one per entry)
     frame = tuple(x[direction[roots]] for x in tangent_frame(dirs)) if span is not None else None
-    unit = _decode_unit_normal(codes("entry_normal", 2, nb), bits, span, dirs[direction[roots]], frame)
+    unit = _decode_unit_normal(normal_codes, bits, span, dirs[direction[roots]], frame, shift)
     length_range = None if version >= 3 else ranges["coherence"]
-    normal = _decode_normal(None, codes("entry_coherence", 1, bits.coherence), length_range, bits, span,
-                            None, unit)[take]  # fmt: skip
+    normal = _decode_normal(None, coherence, length_range, bits, span, None, unit)[take]
     if version >= 3:
         # The tangent frames of the entries that store a normal, gathered like it.
         tb = tuple(x[take] for x in tangent_frame(unit))
-        centroid = _decode_centroid_frame(codes("entry_centroid", 3, max(bits.centroid, bits.depth)), origin,
-                                          float(voxel_size), coords.astype(np.int64), voxel, unit[take], tb, src,
-                                          bits)  # fmt: skip
+        centroid_codes = codes("entry_centroid", 3, max(bits.centroid, bits.depth))
+        depth_bits = None
+        if version >= 5:
+            dshift = np.asarray(dtable, dtype=np.int64)[coherence[0][take]]
+            depth_bits = bits.depth - dshift
+            grouped, centroid_codes = centroid_codes, np.empty_like(centroid_codes)
+            centroid_codes[:, _by_shift(dshift)] = grouped
+        centroid = _decode_centroid_frame(centroid_codes, origin, float(voxel_size), coords.astype(np.int64), voxel,
+                                          unit[take], tb, src, bits, depth_bits)  # fmt: skip
     else:
         centroid_codes = codes("entry_centroid", 3, bits.centroid)
         if centroid_codes.size and int(centroid_codes.max()) > 2**bits.centroid - 2:

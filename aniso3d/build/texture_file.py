@@ -65,7 +65,7 @@ __all__ = ["ARRAYS", "ENCODINGS", "FORMAT_NAME", "FORMAT_VERSION", "TextureFile"
 
 FORMAT_NAME = "aniso3d-texture"
 #: The version written; every version from 1 up to it is read.
-FORMAT_VERSION = 4
+FORMAT_VERSION = 5
 #: The encodings of versions 2 and 3: quantised (default) or the arrays as they are.
 ENCODINGS = ("compact", "exact")
 REBUILD = "rebuild it from its mesh ('aniso3d build MESH -o out.a3d')"
