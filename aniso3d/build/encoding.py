@@ -412,7 +412,10 @@ def depth_shifts(bits: Bits) -> list[int]:
 
 
 def _by_shift(shift: np.ndarray) -> np.ndarray:
-    """The order in which version 5 stores direction codes: grouped by ``shift``, stable."""
+    """The order in which version 5 stores codes that it groups by another
+    field's codes ``shift`` (directions and depths by their shift, shininess
+    by ks): by ``shift``, stable, so the decoder, which has ``shift`` first,
+    puts them back."""
     return np.argsort(shift, kind="stable")
 
 
@@ -845,6 +848,12 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
     # Directions grouped by their shift (stable): LZMA then sees codes of one
     # range at a time, instead of a mixture that hides the coarse ones' savings.
     members["entry_normal"] = to_planes(normal_codes[:, roots][:, _by_shift(shift[roots])], _width(nb_full))
+    # Shininess and kd in the order of the ks codes: a material's values go
+    # together, so a run of one ks holds nearly one shininess, and the bark's
+    # (one colour) or a wall's kd repeat there instead of between the leaves'.
+    by_ks = _by_shift(ks_codes[0, roots])
+    members["entry_shininess"] = to_planes(sh_codes[:, roots][:, by_ks], _width(bits.shininess))
+    members["entry_kd"] = to_planes(kd_codes[:, roots][:, by_ks], _width(bits.kd))
     cover_codes = _encode_cover(arrays["entry_cover"], bits.cover)
     members["entry_cover"] = cover_codes
     members = {n: members[n] for n in MEMBERS if n in members}
@@ -976,9 +985,18 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
             centroid_codes, origin, float(voxel_size), coords.astype(np.int64), voxel,
             bits.centroid,
         )  # fmt: skip
-    kd = _decode_range(codes("entry_kd", 3, bits.kd), bits.kd, ranges["kd"]).T[take]
-    ks = _decode_range(codes("entry_ks", 1, bits.ks), bits.ks, ranges["ks"])[0][take]
-    sh = _decode_range(codes("entry_shininess", 1, bits.shininess), bits.shininess, ranges["shininess"],
+    ks_codes = codes("entry_ks", 1, bits.ks)
+    ks = _decode_range(ks_codes, bits.ks, ranges["ks"])[0][take]
+    sh_codes = codes("entry_shininess", 1, bits.shininess)
+    kd_codes = codes("entry_kd", 3, bits.kd)
+    if version >= 5:
+        by_ks = _by_shift(ks_codes[0])
+        grouped, sh_codes = sh_codes, np.empty_like(sh_codes)
+        sh_codes[:, by_ks] = grouped
+        grouped, kd_codes = kd_codes, np.empty_like(kd_codes)
+        kd_codes[:, by_ks] = grouped
+    kd = _decode_range(kd_codes, bits.kd, ranges["kd"]).T[take]
+    sh = _decode_range(sh_codes, bits.shininess, ranges["shininess"],
                        log=True)[0][take]  # fmt: skip
     if version >= 4:
         cover_codes = _uint8(members, "entry_cover", (1, e))
