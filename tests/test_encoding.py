@@ -95,6 +95,33 @@ def test_occupancy_mask_round_trips_offsets_and_directions():
         enc._decode_mask(bad, 1, 5)
 
 
+@pytest.mark.parametrize("k", [1, 5, 16, 64])
+def test_split_occupancy_mask_round_trips(k):
+    """Version 5's mask (even voxels' rows, then the odd voxels' bits in
+    order of their face neighbours' occupancy) decodes to the same offsets
+    and directions, on a grid where neighbours share directions (a surface)
+    and where they do not; a bit set past the last one is refused."""
+    rng = np.random.default_rng(k)
+    shape = np.array([9, 7, 8])
+    keys = np.unique(rng.integers(0, shape.prod(), 300))
+    coords = np.stack([keys // 56, (keys // 8) % 7, keys % 8], axis=1).astype(np.int64)
+    for occupied in (rng.random((len(keys), k)) < 0.3, np.broadcast_to(rng.random(k) < 0.4, (len(keys), k)).copy()):
+        occupied[:, 0] |= ~occupied.any(axis=1)
+        voxel, d = np.nonzero(occupied)
+        offsets = np.concatenate([[0], np.cumsum(occupied.sum(axis=1))])
+        mask = enc._encode_mask_split(offsets, d, k, coords, shape)
+        got_off, got_d = enc._decode_mask_split(mask, len(keys), k, coords, shape)
+        assert np.array_equal(got_off, offsets) and np.array_equal(got_d, d)
+    odd = int((coords.sum(axis=1) % 2).sum())
+    if (odd * k) % 8:
+        bad = mask.copy()
+        bad[0, -1] |= 1  # the last byte's lowest bit lies past the last odd voxel's bits
+        with pytest.raises(FormatError, match="past the last"):
+            enc._decode_mask_split(bad, len(keys), k, coords, shape)
+    with pytest.raises(FormatError, match="entry_mask has shape"):
+        enc._decode_mask_split(mask[:, :-1], len(keys), k, coords, shape)
+
+
 @pytest.mark.parametrize("bits", [8, 12, 16])
 def test_log_areas_are_within_their_relative_step(bits):
     rng = np.random.default_rng(3)

@@ -263,6 +263,67 @@ def _decode_mask(mask: np.ndarray, m: int, k: int) -> tuple[np.ndarray, np.ndarr
     return offsets, d.astype(np.int32)
 
 
+#: The six face neighbours of a voxel (:func:`_mask_contexts`).
+FACES = np.array([(-1, 0, 0), (1, 0, 0), (0, -1, 0), (0, 1, 0), (0, 0, -1), (0, 0, 1)], dtype=np.int64)
+
+
+def _mask_contexts(occupied: np.ndarray, coords: np.ndarray, shape: np.ndarray, which: np.ndarray) -> np.ndarray:
+    """(len(which), K) context of each sample direction of the voxels
+    ``which``: ``8 n + f``, n of their face neighbours occupied at that
+    direction (``occupied`` (M, K) read at the neighbours only) and f of them
+    voxels at all."""
+    keys = cell_keys(coords, shape)
+    ctx = np.zeros((len(which), occupied.shape[1]), dtype=np.int64)
+    for off in FACES:  # six
+        cell = coords[which] + off
+        inside = np.all((cell >= 0) & (cell < shape), axis=1)
+        key = cell_keys(np.clip(cell, 0, shape - 1), shape)
+        i = np.minimum(np.searchsorted(keys, key), max(len(keys) - 1, 0))
+        hit = inside & (keys[i] == key) if len(keys) else np.zeros(len(which), bool)
+        ctx += 8 * (hit[:, None] & occupied[i]) + hit[:, None]
+    return ctx
+
+
+def _encode_mask_split(offsets: np.ndarray, direction: np.ndarray, k: int, coords: np.ndarray,
+                       shape: np.ndarray) -> np.ndarray:  # fmt: skip
+    """(1, L) uint8: version 5's occupancy. The voxels whose ``i + j + k`` is
+    even store their mask rows as :func:`_encode_mask` does; the odd ones'
+    faces all touch even voxels, so each of their bits is stored in order of
+    its context (:func:`_mask_contexts`: how many face neighbours are
+    voxels and have an entry at that direction), bits packed. A surface
+    continuing across a face makes a bit with occupied neighbours nearly
+    always set, one without nearly always clear: the runs compress."""
+    rows = _encode_mask(offsets, direction, k)
+    occupied = np.unpackbits(rows, axis=1, count=k).astype(bool)
+    odd = np.flatnonzero(coords.sum(axis=1) % 2 == 1)
+    ctx = _mask_contexts(occupied, coords, shape, odd)
+    bits = occupied[odd].ravel()[_by_shift(ctx.ravel())]
+    return np.concatenate([rows[coords.sum(axis=1) % 2 == 0].ravel(), np.packbits(bits)])[None]
+
+
+def _decode_mask_split(mask: np.ndarray, m: int, k: int, coords: np.ndarray,
+                       shape: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """The inverse of :func:`_encode_mask_split`: (offsets, direction) as :func:`_decode_mask`."""
+    nb = (k + 7) // 8
+    even = coords.sum(axis=1) % 2 == 0
+    ne, no = int(even.sum()), int(m - even.sum())
+    if mask.shape != (1, ne * nb + (no * k + 7) // 8):
+        raise FormatError(f"entry_mask has shape {mask.shape}, expected {(1, ne * nb + (no * k + 7) // 8)}")
+    rows = np.zeros((m, nb), dtype=np.uint8)
+    rows[even] = mask[0, : ne * nb].reshape(ne, nb)
+    occupied = np.unpackbits(rows, axis=1, count=k).astype(bool) if m else np.zeros((0, k), bool)
+    odd = np.flatnonzero(~even)
+    ctx = _mask_contexts(occupied, coords, shape, odd)
+    packed = mask[0, ne * nb :]
+    if np.any(np.unpackbits(packed)[no * k :]):
+        raise FormatError("entry_mask sets bits past the last sample direction")
+    flat = np.empty(no * k, dtype=bool)
+    flat[_by_shift(ctx.ravel())] = np.unpackbits(packed, count=no * k).astype(bool)
+    occupied[odd] = flat.reshape(no, k)
+    rows[odd] = np.packbits(occupied[odd], axis=1)
+    return _decode_mask(rows, m, k)
+
+
 def _encode_log(a: np.ndarray, bits: int) -> tuple[np.ndarray, list[float]]:
     """Positive values as ``1 + round((log2 a - lo) / (hi - lo) * (2**bits - 2))``
     over ``[lo, hi] = [max(log2 min, hi - AREA_SPAN), log2 max]``, 0 as 0."""
@@ -822,7 +883,7 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
         "shape": shape,
         "directions": dirs,
         "coords": _encode_keys(coords, shape),
-        "entry_mask": _encode_mask(offsets, arrays["entry_direction"], k),
+        "entry_mask": _encode_mask_split(offsets, arrays["entry_direction"], k, coords, shape),
         "entry_area": to_planes(area_codes, _width(bits.area)),
         "entry_coherence": to_planes(coherence_codes, _width(bits.coherence)),
         "entry_kd": to_planes(kd_codes, _width(bits.kd)),
@@ -926,7 +987,11 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
     k = len(dirs)
     coords = _decode_keys(_uint8(members, "coords", None), shape)
     m = len(coords)
-    offsets, direction = _decode_mask(_uint8(members, "entry_mask", None), m, k)
+    if version >= 5:
+        offsets, direction = _decode_mask_split(_uint8(members, "entry_mask", None), m, k, coords.astype(np.int64),
+                                                shape)  # fmt: skip
+    else:
+        offsets, direction = _decode_mask(_uint8(members, "entry_mask", None), m, k)
     e = len(direction)
     voxel = np.repeat(np.arange(m), np.diff(offsets))
 
