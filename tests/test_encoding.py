@@ -632,6 +632,41 @@ def test_version_2_compact_file_still_loads():
     assert back.total_area() == pytest.approx(built.total_area(), rel=0.01)
 
 
+def parents(tex: AnisoTexture, members: dict) -> np.ndarray:
+    """Each entry's ``entry_parent`` code (0, or 1 + its index in
+    PARENT_OFFSETS) from version 5's member, which stores ranks among the
+    neighbours that have an entry at its direction."""
+    cand = enc._candidates(tex.coords.astype(np.int64), np.asarray(tex.shape, np.int64), tex.entry_offsets,
+                           tex.entry_voxel, tex.entry_direction, len(tex.directions))  # fmt: skip
+    return enc._decode_parent_ranks(members["entry_parent"], cand)
+
+
+def test_parents_are_stored_as_ranks_among_their_candidates(tree_tex):
+    """A parent is one of the neighbours with an entry at the same sample
+    direction (its candidates): version 5 stores its rank among them, for
+    entries that have any, and the ranks decode to the parents."""
+    arrays = {n: getattr(tree_tex, n) for n in ARRAYS}
+    coords, shape = tree_tex.coords.astype(np.int64), np.asarray(tree_tex.shape, np.int64)
+    cand = enc._candidates(coords, shape, tree_tex.entry_offsets, tree_tex.entry_voxel, tree_tex.entry_direction,
+                           len(tree_tex.directions))  # fmt: skip
+    # the candidates, one by one against a dict of the entries
+    key = {(tuple(c), d) for c, d in zip(map(tuple, tree_tex.coords[tree_tex.entry_voxel]), tree_tex.entry_direction,
+                                         strict=True)}  # fmt: skip
+    rng = np.random.default_rng(0)
+    for i in rng.choice(tree_tex.n_entries, 200, replace=False):
+        c, d = tree_tex.coords[tree_tex.entry_voxel[i]], tree_tex.entry_direction[i]
+        want = [(tuple(c + o), d) in key for o in enc.PARENT_OFFSETS]
+        assert cand[i].tolist() == want
+    parent = enc._copy_parents(coords, shape, tree_tex.entry_voxel, tree_tex.entry_direction.astype(np.int64),
+                               len(tree_tex.directions), [enc._encode_range(tree_tex.entry_kd.T, 9)[0]])  # fmt: skip
+    ranks = enc._encode_parent_ranks(parent, cand)
+    assert len(ranks) == np.sum(cand.any(axis=1)) < tree_tex.n_entries and ranks.max() < parent.max()
+    assert np.array_equal(enc._decode_parent_ranks(ranks, cand), parent)
+    assert np.all(cand[np.flatnonzero(parent), parent[parent > 0].astype(np.int64) - 1])
+    members, _ = enc.encode(arrays, tree_tex.voxel_size)
+    assert members["entry_parent"].shape == (np.sum(cand.any(axis=1)),)
+
+
 def test_copying_from_a_neighbour_loses_nothing(tree_tex):
     """Entries with a parent take its normal and material codes instead of
     storing their own: only where the codes are equal, so every entry decodes
@@ -639,7 +674,7 @@ def test_copying_from_a_neighbour_loses_nothing(tree_tex):
     run on every entry, on a tree where many entries do copy."""
     arrays = {n: getattr(tree_tex, n) for n in ARRAYS}
     members, params = enc.encode(arrays, tree_tex.voxel_size)
-    parent = members["entry_parent"]
+    parent = parents(tree_tex, members)
     assert 0.2 < np.mean(parent > 0) < 1 and parent.max() <= len(enc.PARENT_OFFSETS)
     got = tree_tex.as_stored()
     for name, field, log in (("entry_kd", "kd", False), ("entry_ks", "ks", False),
@@ -684,7 +719,7 @@ def test_a_childs_depth_is_stored_against_its_sources_plane():
     mesh = Mesh.from_arrays(q.vertices @ rot.T, q.faces, q.kd, q.ks, q.shininess, name="tilted")
     tex = build_texture(mesh, 32, 16)
     members, _ = enc.encode({n: getattr(tex, n) for n in ARRAYS}, tex.voxel_size)
-    parent = members["entry_parent"]
+    parent = parents(tex, members)
     assert np.mean(parent > 0) > 0.95
     b = DEFAULT_BITS.depth
     depth = enc.from_planes(members["entry_centroid"], 3, enc._width(max(b, DEFAULT_BITS.centroid)))[0]

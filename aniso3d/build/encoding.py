@@ -759,6 +759,55 @@ def _copy_parents(coords, shape, voxel, direction, k, fields: list[np.ndarray]) 
     return parent
 
 
+def _candidates(coords: np.ndarray, shape: np.ndarray, offsets: np.ndarray, voxel: np.ndarray,
+                direction: np.ndarray, k: int) -> np.ndarray:  # fmt: skip
+    """(E, 13) bool: whether the voxel at each of :data:`PARENT_OFFSETS` from
+    an entry's has an entry at its sample direction (a parent it could
+    name). Looked up per voxel, then read per entry."""
+    m = len(coords)
+    keys = cell_keys(coords, shape)
+    occupied = np.zeros((m + 1, k), dtype=bool)  # row m: no voxel
+    occupied[voxel, direction] = True
+    out = np.zeros((len(voxel), len(PARENT_OFFSETS)), dtype=bool)
+    for j, off in enumerate(PARENT_OFFSETS):  # thirteen
+        cell = coords + off
+        inside = np.all((cell >= 0) & (cell < shape), axis=1)
+        key = cell_keys(np.clip(cell, 0, shape - 1), shape)
+        i = np.minimum(np.searchsorted(keys, key), max(m - 1, 0))
+        nb = np.where(inside & (keys[i] == key), i, m) if m else np.zeros(0, np.int64)
+        out[:, j] = occupied[nb[voxel], direction]
+    return out
+
+
+def _encode_parent_ranks(parent: np.ndarray, cand: np.ndarray) -> np.ndarray:
+    """(N,) uint8, version 5's ``entry_parent``: for each entry with at least
+    one candidate (:func:`_candidates`), 0 or the rank of its parent among
+    its candidates (1 the first), in order of how many it has (stable). An
+    entry without candidates has no parent and stores nothing."""
+    n = cand.sum(axis=1)
+    j = np.maximum(parent.astype(np.int64) - 1, 0)
+    rank = np.where(parent > 0, np.take_along_axis(np.cumsum(cand, axis=1), j[:, None], axis=1)[:, 0], 0)
+    has = np.flatnonzero(n > 0)
+    return rank[has][_by_shift(n[has])].astype(np.uint8)
+
+
+def _decode_parent_ranks(ranks: np.ndarray, cand: np.ndarray) -> np.ndarray:
+    """The inverse of :func:`_encode_parent_ranks`: (E,) uint8 parents."""
+    n = cand.sum(axis=1)
+    has = np.flatnonzero(n > 0)
+    if ranks.shape != (len(has),):
+        raise FormatError(f"entry_parent has shape {ranks.shape}, expected {(len(has),)}")
+    if len(ranks) and int(ranks.max()) > len(PARENT_OFFSETS):
+        raise FormatError(f"entry_parent holds codes above {len(PARENT_OFFSETS)}")
+    rank = np.zeros(len(n), dtype=np.int64)
+    rank[has[_by_shift(n[has])]] = ranks
+    if np.any(rank > n):
+        raise FormatError("entry_parent names a neighbour without an entry in that sample direction")
+    # the rank-th candidate: the first offset whose running count reaches it
+    j = np.argmax(np.cumsum(cand, axis=1) >= np.maximum(rank, 1)[:, None], axis=1)
+    return np.where(rank > 0, j + 1, 0).astype(np.uint8)
+
+
 def _copy_sources(parent: np.ndarray, coords, shape, voxel, direction, k) -> np.ndarray:
     """(E,) index of the entry whose stored codes each entry takes: itself
     when ``parent`` is 0, else its parent's source (pointer jumping: about
@@ -894,7 +943,7 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
     copied = {"entry_normal": normal_codes, "entry_coherence": coherence_codes, "entry_kd": kd_codes,
               "entry_ks": ks_codes, "entry_shininess": sh_codes}  # fmt: skip
     parent = _copy_parents(coords, shape, voxel, direction, k, [copied[n] for n in COPIED])
-    members["entry_parent"] = parent
+    members["entry_parent"] = _encode_parent_ranks(parent, _candidates(coords, shape, offsets, voxel, direction, k))
     src = _copy_sources(parent, coords, shape, voxel, direction, k)
     unit_dec = _decode_unit_normal(normal_codes, bits, span, sample, shift=shift)
     dtable = depth_shifts(bits)
@@ -996,7 +1045,14 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
     voxel = np.repeat(np.arange(m), np.diff(offsets))
 
     if version >= 3:
-        parent = _uint8(members, "entry_parent", (e,))
+        if version >= 5:
+            ranks = members["entry_parent"]
+            if ranks.dtype != np.uint8 or ranks.ndim != 1:
+                raise FormatError(f"entry_parent has shape {ranks.shape} and dtype {ranks.dtype}, expected uint8")
+            parent = _decode_parent_ranks(ranks, _candidates(coords.astype(np.int64), shape, offsets, voxel,
+                                                             direction, k))  # fmt: skip
+        else:
+            parent = _uint8(members, "entry_parent", (e,))
         src = _copy_sources(parent, coords.astype(np.int64), shape, voxel, direction, k)
         # A copied member holds the codes of entries without a parent, in
         # order: entry i takes row rank[src[i]] of it. Decoded for those
