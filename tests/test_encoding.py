@@ -23,6 +23,7 @@ from aniso3d.build.encoding import ARRAYS, DEFAULT_BITS, Bits, facet_density
 from aniso3d.build.pyramid import pyramid
 from aniso3d.build.texture import QUANTISED
 from aniso3d.build.texture_file import FORMAT_VERSION, encoded_size, read_texture_file
+from aniso3d.grid import tangent_frame
 
 DATA = Path(__file__).resolve().parent / "data"
 
@@ -822,3 +823,36 @@ def test_spread_entries_make_the_file_smaller_and_flat_ones_keep_their_codes(tre
     for name in ("entry_normal", "entry_centroid", "entry_area", "entry_kd"):
         np.testing.assert_array_equal(getattr(with_shifts, name)[flat], getattr(without, name)[flat], err_msg=name)
     assert not np.array_equal(with_shifts.entry_normal[~flat], without.entry_normal[~flat])
+
+
+def test_stored_orders_lose_nothing(tree_tex):
+    """Version 5 stores depths grouped by their bits, the children's in-plane
+    codes in order of their sources' centroids, shininess and kd in order of
+    ks: orders only. The centroids decode to exactly what the same codes in
+    entry order give, and kd to what quantising it alone gives."""
+    arrays = {n: getattr(tree_tex, n) for n in ARRAYS}
+    members, params = enc.encode(arrays, tree_tex.voxel_size)
+    got = enc.decode(members, params, tree_tex.voxel_size)
+    coords, shape = tree_tex.coords.astype(np.int64), np.asarray(tree_tex.shape, np.int64)
+    voxel, direction, k = tree_tex.entry_voxel, tree_tex.entry_direction, len(tree_tex.directions)
+    parent = parents(tree_tex, members)
+    src = enc._copy_sources(parent, coords, shape, voxel, direction, k)
+    assert np.mean(src != np.arange(tree_tex.n_entries)) > 0.2
+    unit = got["entry_normal"].astype(np.float64)
+    unit /= np.linalg.norm(unit, axis=1, keepdims=True)
+    q = enc._encode_spread(np.minimum(np.linalg.norm(got["entry_normal"], axis=1), 1.0), DEFAULT_BITS.coherence)[0]
+    db = DEFAULT_BITS.depth - np.asarray(params["depth_shifts"])[q]
+    assert len(np.unique(db)) > 1
+    args = (tree_tex.origin, tree_tex.voxel_size, coords, voxel)
+    for ordered in (False, True):
+        codes = enc._encode_centroid_frame(tree_tex.entry_centroid, *args, unit, src, DEFAULT_BITS, db, ordered)
+        back = enc._decode_centroid_frame(codes, *args, unit, tangent_frame(unit), src, DEFAULT_BITS, db, ordered)
+        # (the decoder's unit normals are float64 from their codes: within rounding of these)
+        np.testing.assert_allclose(back, got["entry_centroid"], rtol=0, atol=1e-6 * tree_tex.voxel_size)
+        if ordered:
+            assert not np.array_equal(codes, plain) and np.array_equal(back, plain_back)
+        plain, plain_back = codes, back
+    x = tree_tex.entry_kd.astype(np.float64).T
+    kd_codes, kd_range = enc._encode_range(x, DEFAULT_BITS.kd)
+    alone = enc._decode_range(kd_codes, DEFAULT_BITS.kd, kd_range).T.astype(np.float32)
+    np.testing.assert_array_equal(got["entry_kd"], alone)

@@ -658,8 +658,24 @@ def _depth_codes(f: np.ndarray, unit: np.ndarray, bits) -> np.ndarray:
     return m + np.clip(np.round(np.sum(f * unit, axis=1) * s), -m, m).astype(np.int64)
 
 
+def _plane_orders(at: np.ndarray, t: np.ndarray, b: np.ndarray, child: np.ndarray, e: int,
+                  bits: Bits) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Version 5's order of the two in-plane centroid rows: first the
+    entries without a parent, in order, then the children in order of their
+    source's centroid as seen from their voxel, ``at`` (its code along ``t``,
+    along ``b``; stable). A leaf continuing across a face puts its centroid
+    near its source's: each run of one predicted code holds a narrow spread."""
+    _, sp = _steps(bits.centroid)
+    root = np.setdiff1d(np.arange(e), child, assume_unique=True)
+    tc, bc = t[child], b[child]
+    up = np.round(np.sum(at * tc, axis=1) * sp)
+    vp = np.round(np.sum(at * bc, axis=1) * sp)
+    return (np.concatenate([root, child[np.argsort(up, kind="stable")]]),
+            np.concatenate([root, child[np.argsort(vp, kind="stable")]]))  # fmt: skip
+
+
 def _encode_centroid_frame(centroid, origin, voxel_size, coords, voxel, unit, parent_src, bits,
-                           depth_bits=None) -> np.ndarray:  # fmt: skip
+                           depth_bits=None, ordered: bool = False) -> np.ndarray:  # fmt: skip
     """(3, E) codes of each centroid in its entry's normal frame (version 3):
     its offset from the voxel centre along the decoded unit normal ``unit``
     (``bits.depth`` bits, within h sqrt(3) / 4 s), and in the plane
@@ -671,7 +687,9 @@ def _encode_centroid_frame(centroid, origin, voxel_size, coords, voxel, unit, pa
     ``2**bits.depth``, from the depth of that plane in its voxel.
     ``depth_bits`` (E,): each entry's depth bits (version 5: fewer for
     spread normals, :func:`depth_shifts`; a child has its source's), else
-    ``bits.depth``."""
+    ``bits.depth``. ``ordered`` (version 5): the rows as stored, depths
+    grouped by their bits (:func:`_by_shift`), the in-plane rows in
+    :func:`_plane_orders`; else in entry order."""
     f = (np.asarray(centroid, dtype=np.float64) - origin) / voxel_size - coords[voxel] - 0.5
     f = np.clip(f, -0.5, 0.5)
     mp, sp = _steps(bits.centroid)
@@ -689,25 +707,42 @@ def _encode_centroid_frame(centroid, origin, voxel_size, coords, voxel, unit, pa
         at += coords[voxel[root]] - coords[voxel[child]]
         dc = db[child]
         codes[0, child] = (codes[0, child] - _depth_codes(at, unit[child], dc)) % np.left_shift(1, dc)
+    if ordered:
+        ou, ov = _plane_orders(at if len(child) else np.zeros((0, 3)), t, b, child, len(f), bits)
+        codes = np.stack([codes[0][_by_shift(db)], codes[1][ou], codes[2][ov]])
     return codes.astype(np.uint16)
 
 
 def _decode_centroid_frame(codes, origin, voxel_size, coords, voxel, unit, tb, parent_src, bits,
-                           depth_bits=None) -> np.ndarray:  # fmt: skip
+                           depth_bits=None, ordered: bool = False) -> np.ndarray:  # fmt: skip
     """The inverse of :func:`_encode_centroid_frame`; ``tb`` is
     :func:`~aniso3d.grid.tangent_frame` of ``unit``."""
     t, b = tb
-    codes = codes.astype(np.int64)
-    db = np.full(codes.shape[1], bits.depth, dtype=np.int64) if depth_bits is None else depth_bits
+    e = codes.shape[1]
+    stored = codes.astype(np.int64)
+    db = np.full(e, bits.depth, dtype=np.int64) if depth_bits is None else depth_bits
     md, _ = _steps(db)
     mp, _ = _steps(bits.centroid)
-    if codes.size and (np.any(codes[0] >= np.left_shift(1, db)) or int(codes[1:].max()) > 2 * mp):
+    child = np.flatnonzero(parent_src != np.arange(e))
+    if ordered:
+        # depths back from their groups; the parentless entries' in-plane
+        # codes lead both rows, in order, and give the children's order
+        codes = np.empty_like(stored)
+        codes[0, _by_shift(db)] = stored[0]
+        free = np.setdiff1d(np.arange(e), child, assume_unique=True)
+        codes[1:, free] = stored[1:, : len(free)]
+    else:
+        codes = stored
+    if codes.size and (np.any(codes[0] >= np.left_shift(1, db)) or int(stored[1:].max()) > 2 * mp):
         raise FormatError("entry_centroid holds codes past the voxel")
-    child = np.flatnonzero(parent_src != np.arange(codes.shape[1]))
     if len(child):
         root = parent_src[child]
         at = _frame_offsets(codes[:, root], unit[root], t[root], b[root], bits, db[root])
         at += coords[voxel[root]] - coords[voxel[child]]
+        if ordered:
+            ou, ov = _plane_orders(at, t, b, child, e, bits)
+            codes[1, ou[len(free) :]] = stored[1, len(free) :]
+            codes[2, ov[len(free) :]] = stored[2, len(free) :]
         dc = db[child]
         codes[0, child] = (codes[0, child] + _depth_codes(at, unit[child], dc)) % np.left_shift(1, dc)
     if codes.size and np.any(codes[0] > 2 * md):
@@ -950,8 +985,8 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
     params["depth_shifts"] = dtable
     dshift = np.asarray(dtable, dtype=np.int64)[coherence_codes[0]]
     centroid_codes = _encode_centroid_frame(arrays["entry_centroid"], origin, float(voxel_size), coords, voxel,
-                                            unit_dec, src, bits, bits.depth - dshift)  # fmt: skip
-    members["entry_centroid"] = to_planes(centroid_codes[:, _by_shift(dshift)], _width(max(bits.centroid, bits.depth)))
+                                            unit_dec, src, bits, bits.depth - dshift, ordered=True)  # fmt: skip
+    members["entry_centroid"] = to_planes(centroid_codes, _width(max(bits.centroid, bits.depth)))
     roots = parent == 0
     for n in COPIED:
         members[n] = to_planes(np.atleast_2d(copied[n])[:, roots], _width(getattr(bits, _BITS_OF[n])))
@@ -1094,10 +1129,8 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
         if version >= 5:
             dshift = np.asarray(dtable, dtype=np.int64)[coherence[0][take]]
             depth_bits = bits.depth - dshift
-            grouped, centroid_codes = centroid_codes, np.empty_like(centroid_codes)
-            centroid_codes[:, _by_shift(dshift)] = grouped
         centroid = _decode_centroid_frame(centroid_codes, origin, float(voxel_size), coords.astype(np.int64), voxel,
-                                          unit[take], tb, src, bits, depth_bits)  # fmt: skip
+                                          unit[take], tb, src, bits, depth_bits, ordered=version >= 5)  # fmt: skip
     else:
         centroid_codes = codes("entry_centroid", 3, bits.centroid)
         if centroid_codes.size and int(centroid_codes.max()) > 2**bits.centroid - 2:
