@@ -827,9 +827,10 @@ def test_spread_entries_make_the_file_smaller_and_flat_ones_keep_their_codes(tre
 
 def test_stored_orders_lose_nothing(tree_tex):
     """Version 5 stores depths grouped by their bits, the children's in-plane
-    codes in order of their sources' centroids, shininess and kd in order of
-    ks: orders only. The centroids decode to exactly what the same codes in
-    entry order give, and kd to what quantising it alone gives."""
+    codes in order of their sources' centroids, areas in order of their
+    normal's length, shininess and kd in order of ks: orders only. The
+    centroids decode to exactly what the same codes in entry order give, kd
+    and areas to what quantising them alone gives."""
     arrays = {n: getattr(tree_tex, n) for n in ARRAYS}
     members, params = enc.encode(arrays, tree_tex.voxel_size)
     got = enc.decode(members, params, tree_tex.voxel_size)
@@ -856,3 +857,5 @@ def test_stored_orders_lose_nothing(tree_tex):
     kd_codes, kd_range = enc._encode_range(x, DEFAULT_BITS.kd)
     alone = enc._decode_range(kd_codes, DEFAULT_BITS.kd, kd_range).T.astype(np.float32)
     np.testing.assert_array_equal(got["entry_kd"], alone)
+    area_codes, span = enc._encode_log(tree_tex.entry_area, DEFAULT_BITS.area)
+    np.testing.assert_array_equal(got["entry_area"], enc._decode_log(area_codes, DEFAULT_BITS.area, span))

@@ -472,12 +472,15 @@ def depth_shifts(bits: Bits) -> list[int]:
     return _coarsest(bits.depth, lambda b: 1 / (2 * _steps(b)[1]), DEPTH_SPREAD_SHARE / 2, bits.coherence)
 
 
-def _by_shift(shift: np.ndarray) -> np.ndarray:
+def _by_shift(shift: np.ndarray, then: np.ndarray | None = None) -> np.ndarray:
     """The order in which version 5 stores codes that it groups by another
-    field's codes ``shift`` (directions and depths by their shift, shininess
-    by ks): by ``shift``, stable, so the decoder, which has ``shift`` first,
-    puts them back."""
-    return np.argsort(shift, kind="stable")
+    field's codes ``shift`` (directions by their shift and sample direction,
+    depths by their bits, areas by their normal's length, shininess and kd
+    by ks): by ``shift``, then ``then``, stable, so the decoder, which has
+    those first, puts them back."""
+    if then is None:
+        return np.argsort(shift, kind="stable")
+    return np.lexsort((then, shift))
 
 
 def normal_shifts(bits: Bits, span: float | None) -> list[int]:
@@ -936,6 +939,7 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
     kd_codes, kd_range = _encode_range(np.asarray(arrays["entry_kd"]).T, bits.kd)
     ks_codes, ks_range = _encode_range(arrays["entry_ks"], bits.ks)
     sh_codes, sh_range = _encode_range(arrays["entry_shininess"], bits.shininess, log=True)
+    direction = np.asarray(arrays["entry_direction"], dtype=np.int64)
     span = _frame_span(unit, sample)
     # Spread mean normals' directions are stored coarser (version 5): a shift
     # per length code, written into params.
@@ -950,8 +954,8 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
         framed_table = normal_shifts(bits, span)
         framed_shift = np.asarray(framed_table, dtype=np.int64)[coherence_codes[0]]
         framed = _encode_frame(unit, sample, bits.normal - framed_shift, span)
-        if _deflated(framed[:, _by_shift(framed_shift)], bits.normal) < _deflated(
-                normal_codes[:, _by_shift(shift)], oct_bits(bits)):  # fmt: skip
+        if _deflated(framed[:, _by_shift(framed_shift, direction)], bits.normal) < _deflated(
+                normal_codes[:, _by_shift(shift, direction)], oct_bits(bits)):  # fmt: skip
             normal_codes, table, shift, nb_full = framed, framed_table, framed_shift, bits.normal
         else:
             span = None
@@ -968,13 +972,13 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
         "directions": dirs,
         "coords": _encode_keys(coords, shape),
         "entry_mask": _encode_mask_split(offsets, arrays["entry_direction"], k, coords, shape),
-        "entry_area": to_planes(area_codes, _width(bits.area)),
+        # areas in order of their normal's length: a mix of several facets is larger
+        "entry_area": to_planes(area_codes[_by_shift(coherence_codes[0])], _width(bits.area)),
         "entry_coherence": to_planes(coherence_codes, _width(bits.coherence)),
         "entry_kd": to_planes(kd_codes, _width(bits.kd)),
         "entry_ks": to_planes(ks_codes, _width(bits.ks)),
         "entry_shininess": to_planes(sh_codes, _width(bits.shininess)),
     }
-    direction = np.asarray(arrays["entry_direction"], dtype=np.int64)
     copied = {"entry_normal": normal_codes, "entry_coherence": coherence_codes, "entry_kd": kd_codes,
               "entry_ks": ks_codes, "entry_shininess": sh_codes}  # fmt: skip
     parent = _copy_parents(coords, shape, voxel, direction, k, [copied[n] for n in COPIED])
@@ -992,7 +996,8 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
         members[n] = to_planes(np.atleast_2d(copied[n])[:, roots], _width(getattr(bits, _BITS_OF[n])))
     # Directions grouped by their shift (stable): LZMA then sees codes of one
     # range at a time, instead of a mixture that hides the coarse ones' savings.
-    members["entry_normal"] = to_planes(normal_codes[:, roots][:, _by_shift(shift[roots])], _width(nb_full))
+    members["entry_normal"] = to_planes(normal_codes[:, roots][:, _by_shift(shift[roots], direction[roots])],
+                                        _width(nb_full))  # fmt: skip
     # Shininess and kd in the order of the ks codes: a material's values go
     # together, so a run of one ks holds nearly one shininess, and the bark's
     # (one colour) or a wall's kd repeat there instead of between the leaves'.
@@ -1105,15 +1110,19 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
             raise FormatError(f"{name} holds codes above {b} bits")
         return c
 
-    area = _decode_log(codes("entry_area", 1, bits.area)[0], bits.area, area_span)
     nb = bits.normal if span is not None else oct_bits(bits)
     coherence = codes("entry_coherence", 1, bits.coherence)
+    area_codes = codes("entry_area", 1, bits.area)[0]
+    if version >= 5:
+        grouped, area_codes = area_codes, np.empty_like(area_codes)
+        area_codes[_by_shift(coherence[0][take])] = grouped
+    area = _decode_log(area_codes, bits.area, area_span)
     normal_codes = codes("entry_normal", 2, nb)
     shift = None
     if version >= 5:
         shift = np.asarray(table, dtype=np.int64)[coherence[0]]
         grouped, normal_codes = normal_codes, np.empty_like(normal_codes)
-        normal_codes[:, _by_shift(shift)] = grouped
+        normal_codes[:, _by_shift(shift, direction[roots])] = grouped
         if normal_codes.size and np.any(normal_codes > 2 * (np.left_shift(1, nb - shift - 1) - 1)):
             raise FormatError("entry_normal holds codes past their spread's range")
     # tangent frames of the K sample directions, gathered (not one per entry)
