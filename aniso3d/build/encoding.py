@@ -677,6 +677,22 @@ def _plane_orders(at: np.ndarray, t: np.ndarray, b: np.ndarray, child: np.ndarra
             np.concatenate([root, child[np.argsort(vp, kind="stable")]]))  # fmt: skip
 
 
+def _chord_start(codes: np.ndarray, unit: np.ndarray, t: np.ndarray, b: np.ndarray, bits: Bits,
+                 depth_bits: np.ndarray) -> np.ndarray:  # fmt: skip
+    """(E,) int64 depth code just below where the line through each
+    centroid's in-plane point (its codes 1 and 2), along its normal, enters
+    the voxel: version 5 stores a parentless entry's depth from there
+    (modulo its bits). Oblique planes cut a chord shorter than the voxel's
+    extent along the normal, so the codes from its start span fewer values."""
+    mp, sp = _steps(bits.centroid)
+    md, sd = _steps(depth_bits)
+    p0 = ((codes[1] - mp) / sp)[:, None] * t + ((codes[2] - mp) / sp)[:, None] * b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        enter = np.where(unit != 0, (np.where(unit > 0, -0.5, 0.5) - p0) / unit, -np.inf).max(axis=1)
+    lo = np.floor(np.clip(enter, -1.0, 1.0) * sd).astype(np.int64) - 1
+    return np.clip(md + lo, 0, 2 * md)
+
+
 def _encode_centroid_frame(centroid, origin, voxel_size, coords, voxel, unit, parent_src, bits,
                            depth_bits=None, ordered: bool = False) -> np.ndarray:  # fmt: skip
     """(3, E) codes of each centroid in its entry's normal frame (version 3):
@@ -711,6 +727,9 @@ def _encode_centroid_frame(centroid, origin, voxel_size, coords, voxel, unit, pa
         dc = db[child]
         codes[0, child] = (codes[0, child] - _depth_codes(at, unit[child], dc)) % np.left_shift(1, dc)
     if ordered:
+        free = np.setdiff1d(np.arange(len(f)), child, assume_unique=True)
+        start = _chord_start(codes[:, free], unit[free], t[free], b[free], bits, db[free])
+        codes[0, free] = (codes[0, free] - start) % np.left_shift(1, db[free])
         ou, ov = _plane_orders(at if len(child) else np.zeros((0, 3)), t, b, child, len(f), bits)
         codes = np.stack([codes[0][_by_shift(db)], codes[1][ou], codes[2][ov]])
     return codes.astype(np.uint16)
@@ -727,17 +746,19 @@ def _decode_centroid_frame(codes, origin, voxel_size, coords, voxel, unit, tb, p
     md, _ = _steps(db)
     mp, _ = _steps(bits.centroid)
     child = np.flatnonzero(parent_src != np.arange(e))
+    codes = np.empty_like(stored) if ordered else stored
     if ordered:
-        # depths back from their groups; the parentless entries' in-plane
-        # codes lead both rows, in order, and give the children's order
-        codes = np.empty_like(stored)
+        # depths back from their groups
         codes[0, _by_shift(db)] = stored[0]
-        free = np.setdiff1d(np.arange(e), child, assume_unique=True)
-        codes[1:, free] = stored[1:, : len(free)]
-    else:
-        codes = stored
     if codes.size and (np.any(codes[0] >= np.left_shift(1, db)) or int(stored[1:].max()) > 2 * mp):
         raise FormatError("entry_centroid holds codes past the voxel")
+    if ordered:
+        # the parentless entries' in-plane codes lead both rows, in order:
+        # they give their depths' chords, and the children's order
+        free = np.setdiff1d(np.arange(e), child, assume_unique=True)
+        codes[1:, free] = stored[1:, : len(free)]
+        start = _chord_start(codes[:, free], unit[free], t[free], b[free], bits, db[free])
+        codes[0, free] = (codes[0, free] + start) % np.left_shift(1, db[free])
     if len(child):
         root = parent_src[child]
         at = _frame_offsets(codes[:, root], unit[root], t[root], b[root], bits, db[root])
