@@ -478,9 +478,13 @@ def _by_shift(shift: np.ndarray, then: np.ndarray | None = None) -> np.ndarray:
     depths by their bits, areas by their normal's length, shininess and kd
     by ks): by ``shift``, then ``then``, stable, so the decoder, which has
     those first, puts them back."""
-    if then is None:
-        return np.argsort(shift, kind="stable")
-    return np.lexsort((then, shift))
+    key = np.asarray(shift, dtype=np.int64)
+    if then is not None:
+        then = np.asarray(then, dtype=np.int64)
+        key = key * (int(then.max(initial=0)) + 1) + then
+    if len(key) and 0 <= key.min() and key.max() < 2**16:
+        key = key.astype(np.uint16)  # NumPy's stable sort of small integers is a radix sort
+    return np.argsort(key, kind="stable")
 
 
 def normal_shifts(bits: Bits, span: float | None) -> list[int]:
