@@ -1,4 +1,4 @@
-"""The compact encoding of a texture: what an ``.a3d`` file of version 4 stores.
+"""The compact encoding of a texture: what an ``.a3d`` file of version 5 stores.
 
 In memory a texture keeps float64 and float32 arrays, about 400 bytes per
 occupied voxel of the default tree. To store it, each field is quantised no
@@ -15,16 +15,20 @@ field                       stored as                                           
 ==========================  ======================================================  ===============================
 origin, shape, directions   as they are                                             exact
 coords                      sorted cell keys, delta-coded, in byte planes           exact
-entry_offsets, _direction   one bit per voxel and sample direction (M, K/8)         exact
+entry_offsets, _direction   one bit per voxel and sample direction (version 5: the  exact
+                            odd voxels' bits in order of their neighbours')
 entry_parent                per entry, 0 or which of 13 earlier neighbours it       exact
-                            copies normal and materials from (see below)
+                            copies normal and materials from (see below; version
+                            5: its rank among those with an entry there)
 entry_area                  log2, 11 bits, over [max / 2**24, max]                  relative 0.41 %
 entry_normal (direction)    about the sample direction N_p, 10 bits a coordinate,   0.14 degrees (0.07 at K = 16);
-                            or octahedral with 12, whichever deflates smaller       0.06 degrees
+                            or octahedral with 12, whichever deflates smaller;      0.06 degrees; spread normals:
+                            fewer bits for spread normals (version 5, below)        sigma / 16 or that
 entry_normal (length) c     6 bits of sqrt(1 - c), steps of 1/63                    sqrt(1 - c) within 1/126
 entry_centroid              in the frame of the decoded normal: depth along it,     depth h/1180 (10 bits),
                             10 bits, and two tangent coordinates, 6 bits each, on   h/68 in the plane; the
-                            [-sqrt(3)/2, sqrt(3)/2] h about the voxel centre        voxel's middle exact
+                            [-sqrt(3)/2, sqrt(3)/2] h about the voxel centre        voxel's middle exact;
+                            (version 5: fewer depth bits for spread normals)        spread: sigma h / 32 or that
 entry_kd                    9 bits: steps of S/511 over the values' own range,      S/1022
                             S = max(1, largest value)
 entry_ks                    8 bits, likewise                                        S/510
@@ -32,6 +36,30 @@ entry_shininess             8 bits of log2(1 + n), likewise, S = log2(1 + larges
 entry_cover (version 4)     6 bits of 2 (1 - c), c in [0.5, 1]                     1/252; 1 exact
 density                     F (see below), plus D - F in 3 bits of A_v              min(|D - F|, A_v / 14)
 ==========================  ======================================================  ===============================
+
+**Spread normals** (version 5). A mean normal of length c < 1 averages
+facets whose normals spread about it by about ``sigma = sqrt(2 (1 - c))``
+radians: scattered foliage, where most entries mix leaves of unrelated
+directions. Its direction is stored no finer than ``sigma / 16``
+(:data:`NORMAL_SPREAD_SHARE`) and its centroid's depth no finer than
+``sigma h / 32`` (:data:`DEPTH_SPREAD_SHARE` of the ``sigma h / 2`` by
+which such facets lie off their plane), or the field's bits where those are
+coarser: a table per length code of how many bits fewer (``params``
+``normal_shifts`` and ``depth_shifts``). Flat facets (c = 1) keep every bit;
+smooth surfaces nearly all.
+
+**Orders** (version 5). Members are laid out so that LZMA, which adapts to
+what it has just seen, meets runs of alike codes; each order is one the
+decoder rebuilds from what it has decoded before, so nothing is lost: the
+odd voxels' occupancy bits (every face of theirs touches even voxels) in
+order of how many face neighbours have an entry at that direction;
+``entry_parent`` as a rank among the neighbours that do, for entries that
+have any, in order of how many; directions grouped by shift and sample
+direction; areas by their normal's length code; shininess and kd by ks (a
+material's values together); depths by their bits; the children's in-plane
+centroid codes in order of their source's centroid seen from their voxel (a
+leaf continuing across a face); a parentless entry's depth from where the
+line through its in-plane point enters the voxel.
 
 **Copying from a neighbour** (version 3). A leaf, a blade or a bar that
 crosses several voxels leaves in each an entry with the same sample
@@ -70,7 +98,8 @@ Every field's quantiser is a pair of functions here (``_encode_*`` and
 ``_decode_*``); :func:`encode` and :func:`decode` run them all. A code array
 of b bits is one uint8 (b <= 8) or uint16 array, stored as byte planes (all
 low bytes, then all high bytes) so that the mostly empty high bytes compress
-away. :func:`decode` also reads version 2's layout (no ``entry_parent``, every
+away. :func:`decode` also reads versions 3 and 4 (every entry at the
+field's bits, members in entry order) and version 2's layout (no ``entry_parent``, every
 entry's codes stored, centroids as ``round(62 f)`` per axis of the offset f
 in the voxel).
 
@@ -111,7 +140,7 @@ MEMBERS_V2 = ("origin", "shape", "directions", "coords", "entry_mask", "entry_ar
 #: neighbour's (:func:`_copy_parents`); the fields it names are then stored
 #: for the other entries only.
 MEMBERS_V3 = (*MEMBERS_V2[:5], "entry_parent", *MEMBERS_V2[5:])
-#: Version 4's: version 3's and ``entry_cover``.
+#: Version 4's and 5's: version 3's and ``entry_cover``.
 MEMBERS = (*MEMBERS_V3, "entry_cover")
 #: Fields (members) an entry with a parent copies from it instead of storing.
 COPIED = ("entry_normal", "entry_coherence", "entry_kd", "entry_ks", "entry_shininess")
