@@ -845,14 +845,15 @@ def test_stored_orders_lose_nothing(tree_tex):
     db = DEFAULT_BITS.depth - np.asarray(params["depth_shifts"])[q]
     assert len(np.unique(db)) > 1
     args = (tree_tex.origin, tree_tex.voxel_size, coords, voxel)
+    codes, back = {}, {}
     for ordered in (False, True):
-        codes = enc._encode_centroid_frame(tree_tex.entry_centroid, *args, unit, src, DEFAULT_BITS, db, ordered)
-        back = enc._decode_centroid_frame(codes, *args, unit, tangent_frame(unit), src, DEFAULT_BITS, db, ordered)
+        codes[ordered] = enc._encode_centroid_frame(tree_tex.entry_centroid, *args, unit, src, DEFAULT_BITS, db,
+                                                    ordered)  # fmt: skip
+        back[ordered] = enc._decode_centroid_frame(codes[ordered], *args, unit, tangent_frame(unit), src,
+                                                   DEFAULT_BITS, db, ordered)  # fmt: skip
         # (the decoder's unit normals are float64 from their codes: within rounding of these)
-        np.testing.assert_allclose(back, got["entry_centroid"], rtol=0, atol=1e-6 * tree_tex.voxel_size)
-        if ordered:
-            assert not np.array_equal(codes, plain) and np.array_equal(back, plain_back)
-        plain, plain_back = codes, back
+        np.testing.assert_allclose(back[ordered], got["entry_centroid"], rtol=0, atol=1e-6 * tree_tex.voxel_size)
+    assert not np.array_equal(codes[True], codes[False]) and np.array_equal(back[True], back[False])
     x = tree_tex.entry_kd.astype(np.float64).T
     kd_codes, kd_range = enc._encode_range(x, DEFAULT_BITS.kd)
     alone = enc._decode_range(kd_codes, DEFAULT_BITS.kd, kd_range).T.astype(np.float32)
