@@ -539,6 +539,9 @@ DAMAGED = [
     ("normal shift too coarse", dict(header=lambda h: h["params"]["normal_shifts"].__setitem__(5, 15)),
      "normal_shifts"),
     ("depth shifts missing", dict(header=lambda h: h["params"].pop("depth_shifts")), "depth_shifts"),
+    ("centroid layout unknown", dict(header=lambda h: h["params"].update(centroid_layout="zigzag")),
+     "centroid_layout is 'zigzag'"),
+    ("area order missing", dict(header=lambda h: h["params"].pop("area_order")), "area_order is None"),
     ("normal past its spread's range",
      dict(header=lambda h: h["params"].update(normal_shifts=[8] * len(h["params"]["normal_shifts"]))),
      "entry_normal holds codes past"),
@@ -827,8 +830,9 @@ def test_spread_entries_make_the_file_smaller_and_flat_ones_keep_their_codes(tre
 
 def test_stored_orders_lose_nothing(tree_tex):
     """Version 5 stores depths grouped by their bits, the children's in-plane
-    codes in order of their sources' centroids, areas in order of their
-    normal's length, shininess and kd in order of ks: orders only. The
+    codes in order of their sources' centroids (or entry order), areas in
+    order of their normal's length (or entry order), shininess and kd in
+    order of ks: orders only. The
     centroids decode to exactly what the same codes in entry order give, kd
     and areas to what quantising them alone gives."""
     arrays = {n: getattr(tree_tex, n) for n in ARRAYS}
@@ -846,17 +850,51 @@ def test_stored_orders_lose_nothing(tree_tex):
     assert len(np.unique(db)) > 1
     args = (tree_tex.origin, tree_tex.voxel_size, coords, voxel)
     codes, back = {}, {}
-    for ordered in (False, True):
-        codes[ordered] = enc._encode_centroid_frame(tree_tex.entry_centroid, *args, unit, src, DEFAULT_BITS, db,
-                                                    ordered)  # fmt: skip
-        back[ordered] = enc._decode_centroid_frame(codes[ordered], *args, unit, tangent_frame(unit), src,
-                                                   DEFAULT_BITS, db, ordered)  # fmt: skip
+    for layout in (None, *enc.CENTROID_LAYOUTS):
+        codes[layout] = enc._encode_centroid_frame(tree_tex.entry_centroid, *args, unit, src, DEFAULT_BITS, db,
+                                                   layout)  # fmt: skip
+        back[layout] = enc._decode_centroid_frame(codes[layout], *args, unit, tangent_frame(unit), src,
+                                                  DEFAULT_BITS, db, layout)  # fmt: skip
         # (the decoder's unit normals are float64 from their codes: within rounding of these)
-        np.testing.assert_allclose(back[ordered], got["entry_centroid"], rtol=0, atol=1e-6 * tree_tex.voxel_size)
-    assert not np.array_equal(codes[True], codes[False]) and np.array_equal(back[True], back[False])
+        np.testing.assert_allclose(back[layout], got["entry_centroid"], rtol=0, atol=1e-6 * tree_tex.voxel_size)
+    for layout in enc.CENTROID_LAYOUTS:
+        assert not np.array_equal(codes[layout], codes[None]) and np.array_equal(back[layout], back[None])
+    # the tree's leaves pack smaller in their sources' order
+    assert params["centroid_layout"] == "sources"
     x = tree_tex.entry_kd.astype(np.float64).T
     kd_codes, kd_range = enc._encode_range(x, DEFAULT_BITS.kd)
     alone = enc._decode_range(kd_codes, DEFAULT_BITS.kd, kd_range).T.astype(np.float32)
     np.testing.assert_array_equal(got["entry_kd"], alone)
     area_codes, span = enc._encode_log(tree_tex.entry_area, DEFAULT_BITS.area)
     np.testing.assert_array_equal(got["entry_area"], enc._decode_log(area_codes, DEFAULT_BITS.area, span))
+
+
+def test_each_file_keeps_the_smaller_layout(tree_tex, monkeypatch):
+    """Centroids' in-plane rows and areas are laid out in entry order or in a
+    predicted order, whichever packs smaller (LZMA's fastest preset):
+    checked against both layouts made here, and each decodes to the same
+    texture."""
+    arrays = {n: getattr(tree_tex, n) for n in ARRAYS}
+    members, params = enc.encode(arrays, tree_tex.voxel_size)
+    got = enc.decode(members, params, tree_tex.voxel_size)
+    length = np.linalg.norm(tree_tex.entry_normal.astype(np.float64), axis=1)
+    q = enc._encode_spread(np.minimum(length, 1.0), DEFAULT_BITS.coherence)[0]
+    area_codes, _ = enc._encode_log(tree_tex.entry_area, DEFAULT_BITS.area)
+    laid = {"entries": enc.to_planes(area_codes, 2),
+            "length": enc.to_planes(area_codes[np.argsort(q, kind="stable")], 2)}  # fmt: skip
+    assert params["area_order"] == min(laid, key=lambda o: enc._packed(laid[o]))
+    assert np.array_equal(members["entry_area"], laid[params["area_order"]])
+    for layout in enc.CENTROID_LAYOUTS:
+        for order in enc.AREA_ORDERS:
+            monkeypatch.setattr(enc, "CENTROID_LAYOUTS", (layout,))
+            monkeypatch.setattr(enc, "AREA_ORDERS", (order,))
+            m, p = enc.encode(arrays, tree_tex.voxel_size)
+            assert p["centroid_layout"] == layout and p["area_order"] == order
+            if layout == params["centroid_layout"]:
+                assert np.array_equal(m["entry_centroid"], members["entry_centroid"])
+            else:
+                assert enc._packed(m["entry_centroid"]) >= enc._packed(members["entry_centroid"])
+            monkeypatch.undo()
+            back = enc.decode(m, p, tree_tex.voxel_size)
+            for name in ARRAYS:
+                np.testing.assert_array_equal(back[name], got[name], err_msg=name)

@@ -55,11 +55,14 @@ odd voxels' occupancy bits (every face of theirs touches even voxels) in
 order of how many face neighbours have an entry at that direction;
 ``entry_parent`` as a rank among the neighbours that do, for entries that
 have any, in order of how many; directions grouped by shift and sample
-direction; areas by their normal's length code; shininess and kd by ks (a
-material's values together); depths by their bits; the children's in-plane
-centroid codes in order of their source's centroid seen from their voxel (a
-leaf continuing across a face); a parentless entry's depth from where the
-line through its in-plane point enters the voxel.
+direction; shininess and kd by ks (a material's values together); depths by
+their bits; a parentless entry's depth from where the line through its
+in-plane point enters the voxel. Two orders help scattered leaves and hurt
+smooth surfaces, whose neighbouring voxels follow each other in entry order:
+the children's in-plane centroid codes in order of their source's centroid
+seen from their voxel (a leaf continuing across a face), and areas by their
+normal's length code; the encoder keeps whichever of that and entry order
+packs smaller (``params`` ``centroid_layout``, ``area_order``).
 
 **Copying from a neighbour** (version 3). A leaf, a blade or a bar that
 crosses several voxels leaves in each an entry with the same sample
@@ -113,6 +116,7 @@ ranges are clamped to them.
 
 from __future__ import annotations
 
+import lzma
 import math
 import zlib
 from dataclasses import asdict, dataclass
@@ -455,6 +459,19 @@ def oct_bits(bits: Bits) -> int:
     return min(16, bits.normal + 2)
 
 
+#: Version 5's orders of ``entry_area`` (``params["area_order"]``): entry
+#: order, or by the normal's length code (:func:`_by_shift`).
+AREA_ORDERS = ("entries", "length")
+
+
+def _packed(planes: np.ndarray) -> int:
+    """Bytes of byte planes once compressed by LZMA's fastest preset: the
+    encoder's quick measure when it chooses between layouts that the file's
+    LZMA then compresses (deflate ranks some differently: a sphere's areas)."""
+    return len(lzma.compress(np.ascontiguousarray(planes).tobytes(), format=lzma.FORMAT_RAW,
+                             filters=[{"id": lzma.FILTER_LZMA1, "preset": 1}]))  # fmt: skip
+
+
 def _deflated(codes: np.ndarray, bits: int) -> int:
     """Bytes of ``codes`` as stored byte planes once deflated (zlib's default level)."""
     return len(zlib.compress(to_planes(codes, _width(bits)).tobytes()))
@@ -726,8 +743,15 @@ def _chord_start(codes: np.ndarray, unit: np.ndarray, t: np.ndarray, b: np.ndarr
     return np.clip(md + lo, 0, 2 * md)
 
 
+#: Version 5's layouts of the in-plane centroid rows (``params["centroid_layout"]``):
+#: in entry order (cell order: a smooth surface's neighbouring voxels follow
+#: each other), or :func:`_plane_orders` (scattered leaves). The encoder keeps
+#: whichever packs smaller.
+CENTROID_LAYOUTS = ("entries", "sources")
+
+
 def _encode_centroid_frame(centroid, origin, voxel_size, coords, voxel, unit, parent_src, bits,
-                           depth_bits=None, ordered: bool = False) -> np.ndarray:  # fmt: skip
+                           depth_bits=None, layout: str | None = None) -> np.ndarray:  # fmt: skip
     """(3, E) codes of each centroid in its entry's normal frame (version 3):
     its offset from the voxel centre along the decoded unit normal ``unit``
     (``bits.depth`` bits, within h sqrt(3) / 4 s), and in the plane
@@ -739,9 +763,11 @@ def _encode_centroid_frame(centroid, origin, voxel_size, coords, voxel, unit, pa
     ``2**bits.depth``, from the depth of that plane in its voxel.
     ``depth_bits`` (E,): each entry's depth bits (version 5: fewer for
     spread normals, :func:`depth_shifts`; a child has its source's), else
-    ``bits.depth``. ``ordered`` (version 5): the rows as stored, depths
-    grouped by their bits (:func:`_by_shift`), the in-plane rows in
-    :func:`_plane_orders`; else in entry order."""
+    ``bits.depth``. ``layout`` (version 5, one of :data:`CENTROID_LAYOUTS`;
+    None: versions 3 and 4, entry order): a parentless entry's depth is
+    stored from its chord's start (:func:`_chord_start`), the depths grouped
+    by their bits (:func:`_by_shift`), the in-plane rows in entry order or in
+    :func:`_plane_orders`."""
     f = (np.asarray(centroid, dtype=np.float64) - origin) / voxel_size - coords[voxel] - 0.5
     f = np.clip(f, -0.5, 0.5)
     mp, sp = _steps(bits.centroid)
@@ -752,6 +778,7 @@ def _encode_centroid_frame(centroid, origin, voxel_size, coords, voxel, unit, pa
     codes[1] = mp + np.clip(np.round(np.sum(f * t, axis=1) * sp), -mp, mp)
     codes[2] = mp + np.clip(np.round(np.sum(f * b, axis=1) * sp), -mp, mp)
     child = np.flatnonzero(parent_src != np.arange(len(f)))
+    at = np.zeros((0, 3))
     if len(child):
         root = parent_src[child]
         # The sources' centroids as decoded, seen from each child's voxel.
@@ -759,17 +786,19 @@ def _encode_centroid_frame(centroid, origin, voxel_size, coords, voxel, unit, pa
         at += coords[voxel[root]] - coords[voxel[child]]
         dc = db[child]
         codes[0, child] = (codes[0, child] - _depth_codes(at, unit[child], dc)) % np.left_shift(1, dc)
-    if ordered:
+    if layout is not None:
         free = np.setdiff1d(np.arange(len(f)), child, assume_unique=True)
         start = _chord_start(codes[:, free], unit[free], t[free], b[free], bits, db[free])
         codes[0, free] = (codes[0, free] - start) % np.left_shift(1, db[free])
-        ou, ov = _plane_orders(at if len(child) else np.zeros((0, 3)), t, b, child, len(f), bits)
+        ou = ov = np.arange(len(f))
+        if layout == "sources":
+            ou, ov = _plane_orders(at, t, b, child, len(f), bits)
         codes = np.stack([codes[0][_by_shift(db)], codes[1][ou], codes[2][ov]])
     return codes.astype(np.uint16)
 
 
 def _decode_centroid_frame(codes, origin, voxel_size, coords, voxel, unit, tb, parent_src, bits,
-                           depth_bits=None, ordered: bool = False) -> np.ndarray:  # fmt: skip
+                           depth_bits=None, layout: str | None = None) -> np.ndarray:  # fmt: skip
     """The inverse of :func:`_encode_centroid_frame`; ``tb`` is
     :func:`~aniso3d.grid.tangent_frame` of ``unit``."""
     t, b = tb
@@ -779,24 +808,27 @@ def _decode_centroid_frame(codes, origin, voxel_size, coords, voxel, unit, tb, p
     md, _ = _steps(db)
     mp, _ = _steps(bits.centroid)
     child = np.flatnonzero(parent_src != np.arange(e))
-    codes = np.empty_like(stored) if ordered else stored
-    if ordered:
+    codes = stored if layout is None else np.empty_like(stored)
+    if layout is not None:
         # depths back from their groups
         codes[0, _by_shift(db)] = stored[0]
     if codes.size and (np.any(codes[0] >= np.left_shift(1, db)) or int(stored[1:].max()) > 2 * mp):
         raise FormatError("entry_centroid holds codes past the voxel")
-    if ordered:
+    free = np.setdiff1d(np.arange(e), child, assume_unique=True) if layout is not None else None
+    if layout == "entries":
+        codes[1:] = stored[1:]
+    elif layout == "sources":
         # the parentless entries' in-plane codes lead both rows, in order:
-        # they give their depths' chords, and the children's order
-        free = np.setdiff1d(np.arange(e), child, assume_unique=True)
+        # with their depths they give the children's order
         codes[1:, free] = stored[1:, : len(free)]
+    if layout is not None:
         start = _chord_start(codes[:, free], unit[free], t[free], b[free], bits, db[free])
         codes[0, free] = (codes[0, free] + start) % np.left_shift(1, db[free])
     if len(child):
         root = parent_src[child]
         at = _frame_offsets(codes[:, root], unit[root], t[root], b[root], bits, db[root])
         at += coords[voxel[root]] - coords[voxel[child]]
-        if ordered:
+        if layout == "sources":
             ou, ov = _plane_orders(at, t, b, child, e, bits)
             codes[1, ou[len(free) :]] = stored[1, len(free) :]
             codes[2, ov[len(free) :]] = stored[2, len(free) :]
@@ -1026,8 +1058,6 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
         "directions": dirs,
         "coords": _encode_keys(coords, shape),
         "entry_mask": _encode_mask_split(offsets, arrays["entry_direction"], k, coords, shape),
-        # areas in order of their normal's length: a mix of several facets is larger
-        "entry_area": to_planes(area_codes[_by_shift(coherence_codes[0])], _width(bits.area)),
         "entry_coherence": to_planes(coherence_codes, _width(bits.coherence)),
         "entry_kd": to_planes(kd_codes, _width(bits.kd)),
         "entry_ks": to_planes(ks_codes, _width(bits.ks)),
@@ -1042,9 +1072,13 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
     dtable = depth_shifts(bits)
     params["depth_shifts"] = dtable
     dshift = np.asarray(dtable, dtype=np.int64)[coherence_codes[0]]
-    centroid_codes = _encode_centroid_frame(arrays["entry_centroid"], origin, float(voxel_size), coords, voxel,
-                                            unit_dec, src, bits, bits.depth - dshift, ordered=True)  # fmt: skip
-    members["entry_centroid"] = to_planes(centroid_codes, _width(max(bits.centroid, bits.depth)))
+    # Both layouts of the in-plane rows; the file keeps the one that packs smaller.
+    laid = {layout: to_planes(_encode_centroid_frame(arrays["entry_centroid"], origin, float(voxel_size), coords,
+                                                     voxel, unit_dec, src, bits, bits.depth - dshift, layout),
+                              _width(max(bits.centroid, bits.depth)))
+            for layout in CENTROID_LAYOUTS}  # fmt: skip
+    params["centroid_layout"] = min(CENTROID_LAYOUTS, key=lambda layout: _packed(laid[layout]))
+    members["entry_centroid"] = laid[params["centroid_layout"]]
     roots = parent == 0
     for n in COPIED:
         members[n] = to_planes(np.atleast_2d(copied[n])[:, roots], _width(getattr(bits, _BITS_OF[n])))
@@ -1060,6 +1094,12 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
     members["entry_kd"] = to_planes(kd_codes[:, roots][:, by_ks], _width(bits.kd))
     cover_codes = _encode_cover(arrays["entry_cover"], bits.cover)
     members["entry_cover"] = cover_codes
+    # Areas in entry order (a smooth surface's follow each other), or by their
+    # normal's length (a mix of several facets is larger): whichever packs smaller.
+    laid = {"entries": to_planes(area_codes, _width(bits.area)),
+            "length": to_planes(area_codes[_by_shift(coherence_codes[0])], _width(bits.area))}  # fmt: skip
+    params["area_order"] = min(AREA_ORDERS, key=lambda order: _packed(laid[order]))
+    members["entry_area"] = laid[params["area_order"]]
     members = {n: members[n] for n in MEMBERS if n in members}
     if bits.density:
         # The residual against F of the *decoded* entries: what decode adds back.
@@ -1109,13 +1149,19 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
         raise FormatError(f"the encoding parameters are damaged ({exc})") from None
     if len(area_span) != 2 or not all(math.isfinite(x) for x in (*area_span, 0.0 if span is None else span)):
         raise FormatError("the encoding parameters are damaged (not finite numbers)")
-    table = None
+    table, layout, area_order = None, None, None
     if version >= 5:
         table = params.get("normal_shifts")
         full = bits.normal if span is not None else oct_bits(bits)
         if not (isinstance(table, list) and len(table) == 2**bits.coherence and all(
                 not isinstance(x, bool) and isinstance(x, int) and 0 <= x <= full - 2 for x in table)):
             raise FormatError("the encoding parameters are damaged (normal_shifts)")
+        layout = params.get("centroid_layout")
+        if layout not in CENTROID_LAYOUTS:
+            raise FormatError(f"the encoding parameters are damaged (centroid_layout is {layout!r})")
+        area_order = params.get("area_order")
+        if area_order not in AREA_ORDERS:
+            raise FormatError(f"the encoding parameters are damaged (area_order is {area_order!r})")
         dtable = params.get("depth_shifts")
         if not (isinstance(dtable, list) and len(dtable) == 2**bits.coherence and all(
                 not isinstance(x, bool) and isinstance(x, int) and 0 <= x <= bits.depth - 2 for x in dtable)):
@@ -1167,7 +1213,7 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
     nb = bits.normal if span is not None else oct_bits(bits)
     coherence = codes("entry_coherence", 1, bits.coherence)
     area_codes = codes("entry_area", 1, bits.area)[0]
-    if version >= 5:
+    if area_order == "length":
         grouped, area_codes = area_codes, np.empty_like(area_codes)
         area_codes[_by_shift(coherence[0][take])] = grouped
     area = _decode_log(area_codes, bits.area, area_span)
@@ -1193,7 +1239,7 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
             dshift = np.asarray(dtable, dtype=np.int64)[coherence[0][take]]
             depth_bits = bits.depth - dshift
         centroid = _decode_centroid_frame(centroid_codes, origin, float(voxel_size), coords.astype(np.int64), voxel,
-                                          unit[take], tb, src, bits, depth_bits, ordered=version >= 5)  # fmt: skip
+                                          unit[take], tb, src, bits, depth_bits, layout)  # fmt: skip
     else:
         centroid_codes = codes("entry_centroid", 3, bits.centroid)
         if centroid_codes.size and int(centroid_codes.max()) > 2**bits.centroid - 2:
