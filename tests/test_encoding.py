@@ -348,6 +348,7 @@ def test_tree_through_a_file_is_within_every_bound(tree_tex, tree_file):
     assert f.version == FORMAT_VERSION == 5 and f.encoding == "compact"
     with zipfile.ZipFile(tree_file) as zf:
         assert {i.compress_type for i in zf.infolist() if i.filename.endswith(".npy")} == {zipfile.ZIP_LZMA}
+        assert zf.getinfo("header.json").compress_type == zipfile.ZIP_DEFLATED
     # the file holds exactly what as_stored() computes without one
     ref = tree_tex.as_stored()
     for name in ARRAYS:

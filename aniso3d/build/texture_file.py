@@ -148,7 +148,8 @@ def _prepare(arrays, voxel_size, meta, encoding, bits) -> tuple[dict[str, np.nda
 def _write_zip(fh: BinaryIO, members: dict[str, np.ndarray], header: dict) -> None:
     # Streamed into the file: no second copy of the arrays in memory.
     with zipfile.ZipFile(fh, "w") as zf:
-        zf.writestr(_member("header.json"), json.dumps(header, indent=1))
+        # deflated since version 5 (its parameters' tables: 1.9 KiB stored, 0.5 deflated)
+        zf.writestr(_member("header.json", deflate=True), json.dumps(header, indent=1))
         lzma = header["encoding"] == "compact"
         for n, a in members.items():
             with zf.open(_member(n + ".npy", deflate=True, lzma=lzma), "w", force_zip64=a.nbytes > 2**30) as out:
