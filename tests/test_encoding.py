@@ -7,6 +7,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import math
 import re
 import zipfile
 from pathlib import Path
@@ -21,7 +22,8 @@ from aniso3d.build import encoding as enc
 from aniso3d.build.encoding import ARRAYS, DEFAULT_BITS, Bits, facet_density
 from aniso3d.build.pyramid import pyramid
 from aniso3d.build.texture import QUANTISED
-from aniso3d.build.texture_file import FORMAT_VERSION, read_texture_file
+from aniso3d.build.texture_file import FORMAT_VERSION, encoded_size, read_texture_file
+from aniso3d.grid import tangent_frame
 
 DATA = Path(__file__).resolve().parent / "data"
 
@@ -92,6 +94,33 @@ def test_occupancy_mask_round_trips_offsets_and_directions():
     bad = np.full((1, 1), 0xFF, np.uint8)  # K = 5: bits 5..7 must be clear
     with pytest.raises(FormatError, match="past the last"):
         enc._decode_mask(bad, 1, 5)
+
+
+@pytest.mark.parametrize("k", [1, 5, 16, 64])
+def test_split_occupancy_mask_round_trips(k):
+    """Version 5's mask (even voxels' rows, then the odd voxels' bits in
+    order of their face neighbours' occupancy) decodes to the same offsets
+    and directions, on a grid where neighbours share directions (a surface)
+    and where they do not; a bit set past the last one is refused."""
+    rng = np.random.default_rng(k)
+    shape = np.array([9, 7, 8])
+    keys = np.unique(rng.integers(0, shape.prod(), 300))
+    coords = np.stack([keys // 56, (keys // 8) % 7, keys % 8], axis=1).astype(np.int64)
+    for occupied in (rng.random((len(keys), k)) < 0.3, np.broadcast_to(rng.random(k) < 0.4, (len(keys), k)).copy()):
+        occupied[:, 0] |= ~occupied.any(axis=1)
+        voxel, d = np.nonzero(occupied)
+        offsets = np.concatenate([[0], np.cumsum(occupied.sum(axis=1))])
+        mask = enc._encode_mask_split(offsets, d, k, coords, shape)
+        got_off, got_d = enc._decode_mask_split(mask, len(keys), k, coords, shape)
+        assert np.array_equal(got_off, offsets) and np.array_equal(got_d, d)
+    odd = int((coords.sum(axis=1) % 2).sum())
+    if (odd * k) % 8:
+        bad = mask.copy()
+        bad[0, -1] |= 1  # the last byte's lowest bit lies past the last odd voxel's bits
+        with pytest.raises(FormatError, match="past the last"):
+            enc._decode_mask_split(bad, len(keys), k, coords, shape)
+    with pytest.raises(FormatError, match="entry_mask has shape"):
+        enc._decode_mask_split(mask[:, :-1], len(keys), k, coords, shape)
 
 
 @pytest.mark.parametrize("bits", [8, 12, 16])
@@ -250,7 +279,13 @@ def assert_within_bounds(tex: AnisoTexture, got: AnisoTexture, bits: Bits = DEFA
     n, n2 = tex.entry_normal.astype(np.float64), got.entry_normal.astype(np.float64)
     length = np.linalg.norm(n, axis=1)
     bound = max(3 / (np.sqrt(2) * m_oct), np.tan(np.radians(enc.FRAME_MAX_ANGLE)) / (np.sqrt(2) * m))
-    assert angle_between(n, n2).max(initial=0) <= bound + 1e-6
+    # version 5: a spread mean normal (length c < 1) within NORMAL_SPREAD_SHARE
+    # of its facets' spread sqrt(2 (1 - c)), as its length code gives it
+    # (sqrt(1 - c) to half a code)
+    code_spread = np.sqrt(np.clip(1 - np.minimum(length, 1), 0, 1)) + 1 / (2 * (2**bits.coherence - 1))
+    sigma = np.sqrt(2) * code_spread
+    assert np.all(angle_between(n, n2) <= np.maximum(bound, enc.NORMAL_SPREAD_SHARE * sigma) + 1e-6)
+    assert angle_between(n, n2)[length >= 1 - 1e-7].max(initial=0) <= bound + 1e-6
     # length c: sqrt(1 - c) within half a step (float32 normals: |n| to 1e-7,
     # so sqrt(1 - c) to 3e-4), c within a step, 1 exact
     ell = np.minimum(length, 1)
@@ -264,14 +299,18 @@ def assert_within_bounds(tex: AnisoTexture, got: AnisoTexture, bits: Bits = DEFA
     # point farther from the original, inside it): half a step each
     _, s_depth = enc._steps(bits.depth)
     _, s_plane = enc._steps(bits.centroid)
+    # version 5: a spread entry's depth within DEPTH_SPREAD_SHARE of how far its
+    # facets lie off its plane, about sigma / 2 voxel
+    half_depth = np.maximum(1 / (2 * s_depth), enc.DEPTH_SPREAD_SHARE * sigma / 2)
     err = np.linalg.norm(got.entry_centroid - tex.entry_centroid, axis=1) / h
-    assert np.max(err, initial=0) <= np.sqrt(1 / (2 * s_depth) ** 2 + 2 / (2 * s_plane) ** 2) * (1 + 1e-9)
+    assert np.all(err <= np.sqrt(half_depth**2 + 2 / (2 * s_plane) ** 2) * (1 + 1e-9))
     # along the decoded normal, where the clamp left the point alone: half a depth step
     f2 = (got.entry_centroid - tex.origin) / h - tex.coords[tex.entry_voxel]
     inside = np.all((f2 > 1e-9) & (f2 < 1 - 1e-9), axis=1) & (ell > 0)
     unit2 = n2 / np.maximum(np.linalg.norm(n2, axis=1, keepdims=True), 1e-300)
     depth_err = np.abs(np.sum((got.entry_centroid - tex.entry_centroid) * unit2, axis=1))[inside] / h
-    assert np.max(depth_err, initial=0) <= (1 / (2 * s_depth)) * (1 + 1e-4) + 1e-6
+    assert np.all(depth_err <= half_depth[inside] * (1 + 1e-4) + 1e-6)
+    assert np.max(depth_err[length[inside] >= 1 - 1e-7], initial=0) <= (1 / (2 * s_depth)) * (1 + 1e-4) + 1e-6
     # materials: steps of at most S / (2**bits - 1), ends exact
     for name, log in (("entry_kd", False), ("entry_ks", False), ("entry_shininess", True)):
         x = getattr(tex, name).astype(np.float64).reshape(len(a), -1)
@@ -306,15 +345,16 @@ def assert_within_bounds(tex: AnisoTexture, got: AnisoTexture, bits: Bits = DEFA
 def test_tree_through_a_file_is_within_every_bound(tree_tex, tree_file):
     back = AnisoTexture.load(tree_file)
     f = read_texture_file(tree_file)
-    assert f.version == FORMAT_VERSION == 4 and f.encoding == "compact"
+    assert f.version == FORMAT_VERSION == 5 and f.encoding == "compact"
     with zipfile.ZipFile(tree_file) as zf:
         assert {i.compress_type for i in zf.infolist() if i.filename.endswith(".npy")} == {zipfile.ZIP_LZMA}
+        assert zf.getinfo("header.json").compress_type == zipfile.ZIP_DEFLATED
     # the file holds exactly what as_stored() computes without one
     ref = tree_tex.as_stored()
     for name in ARRAYS:
         a, b = getattr(back, name), getattr(ref, name)
         assert a.dtype == b.dtype and np.array_equal(a, b), name
-    assert back.meta == {**tree_tex.meta, QUANTISED: 4} and back.voxel_size == tree_tex.voxel_size
+    assert back.meta == {**tree_tex.meta, QUANTISED: 5} and back.voxel_size == tree_tex.voxel_size
     assert_within_bounds(tree_tex, back)
 
 
@@ -331,7 +371,10 @@ def test_more_bits_cost_more_bytes_and_err_less(tree_tex, tmp_path):
     fine = Bits(area=16, normal=16, centroid=12, depth=12, kd=12, density=12)
     sizes = [tree_tex.save(tmp_path / f"{i}.a3d", bits=b).stat().st_size for i, b in enumerate((Bits(), fine))]
     assert sizes[0] < sizes[1]
-    errs = [np.abs(tree_tex.as_stored(b).entry_centroid - tree_tex.entry_centroid).max() for b in (Bits(), fine)]
+    # on entries of flat facets (a spread entry's steps follow its spread, version 5)
+    flat = np.linalg.norm(tree_tex.entry_normal, axis=1) >= 1 - 1e-7
+    assert 0.3 < flat.mean() < 1
+    errs = [np.abs(tree_tex.as_stored(b).entry_centroid - tree_tex.entry_centroid)[flat].max() for b in (Bits(), fine)]
     assert errs[1] < errs[0] / 8
 
 
@@ -492,7 +535,17 @@ def _set(name, fn):
 
 
 DAMAGED = [
-    ("future version", dict(header=lambda h: h.update(version=5)), "version 5.*Upgrade aniso3d.*aniso3d build"),
+    ("future version", dict(header=lambda h: h.update(version=6)), "version 6.*Upgrade aniso3d.*aniso3d build"),
+    ("normal shifts short", dict(header=lambda h: h["params"].update(normal_shifts=[0, 1])), "normal_shifts"),
+    ("normal shift too coarse", dict(header=lambda h: h["params"]["normal_shifts"].__setitem__(5, 15)),
+     "normal_shifts"),
+    ("depth shifts missing", dict(header=lambda h: h["params"].pop("depth_shifts")), "depth_shifts"),
+    ("centroid layout unknown", dict(header=lambda h: h["params"].update(centroid_layout="zigzag")),
+     "centroid_layout is 'zigzag'"),
+    ("area order missing", dict(header=lambda h: h["params"].pop("area_order")), "area_order is None"),
+    ("normal past its spread's range",
+     dict(header=lambda h: h["params"].update(normal_shifts=[8] * len(h["params"]["normal_shifts"]))),
+     "entry_normal holds codes past"),
     ("unknown encoding", dict(header=lambda h: h.update(encoding="zstd")), "encoding 'zstd'.*Upgrade aniso3d"),
     ("params not an object", dict(header=lambda h: h.update(params=[1])), "params is not an object"),
     ("bits missing", dict(header=lambda h: h["params"].pop("bits")), "encoding parameters are damaged"),
@@ -584,6 +637,41 @@ def test_version_2_compact_file_still_loads():
     assert back.total_area() == pytest.approx(built.total_area(), rel=0.01)
 
 
+def parents(tex: AnisoTexture, members: dict) -> np.ndarray:
+    """Each entry's ``entry_parent`` code (0, or 1 + its index in
+    PARENT_OFFSETS) from version 5's member, which stores ranks among the
+    neighbours that have an entry at its direction."""
+    cand = enc._candidates(tex.coords.astype(np.int64), np.asarray(tex.shape, np.int64), tex.entry_offsets,
+                           tex.entry_voxel, tex.entry_direction, len(tex.directions))  # fmt: skip
+    return enc._decode_parent_ranks(members["entry_parent"], cand)
+
+
+def test_parents_are_stored_as_ranks_among_their_candidates(tree_tex):
+    """A parent is one of the neighbours with an entry at the same sample
+    direction (its candidates): version 5 stores its rank among them, for
+    entries that have any, and the ranks decode to the parents."""
+    arrays = {n: getattr(tree_tex, n) for n in ARRAYS}
+    coords, shape = tree_tex.coords.astype(np.int64), np.asarray(tree_tex.shape, np.int64)
+    cand = enc._candidates(coords, shape, tree_tex.entry_offsets, tree_tex.entry_voxel, tree_tex.entry_direction,
+                           len(tree_tex.directions))  # fmt: skip
+    # the candidates, one by one against a dict of the entries
+    key = {(tuple(c), d) for c, d in zip(map(tuple, tree_tex.coords[tree_tex.entry_voxel]), tree_tex.entry_direction,
+                                         strict=True)}  # fmt: skip
+    rng = np.random.default_rng(0)
+    for i in rng.choice(tree_tex.n_entries, 200, replace=False):
+        c, d = tree_tex.coords[tree_tex.entry_voxel[i]], tree_tex.entry_direction[i]
+        want = [(tuple(c + o), d) in key for o in enc.PARENT_OFFSETS]
+        assert cand[i].tolist() == want
+    parent = enc._copy_parents(coords, shape, tree_tex.entry_voxel, tree_tex.entry_direction.astype(np.int64),
+                               len(tree_tex.directions), [enc._encode_range(tree_tex.entry_kd.T, 9)[0]])  # fmt: skip
+    ranks = enc._encode_parent_ranks(parent, cand)
+    assert len(ranks) == np.sum(cand.any(axis=1)) < tree_tex.n_entries and ranks.max() < parent.max()
+    assert np.array_equal(enc._decode_parent_ranks(ranks, cand), parent)
+    assert np.all(cand[np.flatnonzero(parent), parent[parent > 0].astype(np.int64) - 1])
+    members, _ = enc.encode(arrays, tree_tex.voxel_size)
+    assert members["entry_parent"].shape == (np.sum(cand.any(axis=1)),)
+
+
 def test_copying_from_a_neighbour_loses_nothing(tree_tex):
     """Entries with a parent take its normal and material codes instead of
     storing their own: only where the codes are equal, so every entry decodes
@@ -591,7 +679,7 @@ def test_copying_from_a_neighbour_loses_nothing(tree_tex):
     run on every entry, on a tree where many entries do copy."""
     arrays = {n: getattr(tree_tex, n) for n in ARRAYS}
     members, params = enc.encode(arrays, tree_tex.voxel_size)
-    parent = members["entry_parent"]
+    parent = parents(tree_tex, members)
     assert 0.2 < np.mean(parent > 0) < 1 and parent.max() <= len(enc.PARENT_OFFSETS)
     got = tree_tex.as_stored()
     for name, field, log in (("entry_kd", "kd", False), ("entry_ks", "ks", False),
@@ -605,10 +693,12 @@ def test_copying_from_a_neighbour_loses_nothing(tree_tex):
     sample = tree_tex.directions[tree_tex.entry_direction]
     unit = np.where((length > 0)[:, None], n / np.where(length > 0, length, 1)[:, None], sample)
     span = params["normal_frame_span"]
-    nc = enc._encode_frame(unit, sample, DEFAULT_BITS.normal, span) if span is not None else enc._encode_oct(
-        unit, enc.oct_bits(DEFAULT_BITS))
     cc = enc._encode_spread(np.minimum(length, 1.0), DEFAULT_BITS.coherence)
-    alone = enc._decode_normal(nc, cc, None, DEFAULT_BITS, span, sample)
+    shift = np.asarray(enc.normal_shifts(DEFAULT_BITS, span))[cc[0]]
+    assert params["normal_shifts"] == enc.normal_shifts(DEFAULT_BITS, span) and np.mean(shift > 0) > 0.05
+    nc = enc._encode_frame(unit, sample, DEFAULT_BITS.normal - shift, span) if span is not None else enc._encode_oct(
+        unit, enc.oct_bits(DEFAULT_BITS) - shift)
+    alone = enc._decode_normal(nc, cc, None, DEFAULT_BITS, span, sample, shift=shift)
     np.testing.assert_array_equal(got.entry_normal, alone)
     # and each entry with a parent has the same codes as the neighbour it names
     voxel = tree_tex.entry_voxel
@@ -634,7 +724,7 @@ def test_a_childs_depth_is_stored_against_its_sources_plane():
     mesh = Mesh.from_arrays(q.vertices @ rot.T, q.faces, q.kd, q.ks, q.shininess, name="tilted")
     tex = build_texture(mesh, 32, 16)
     members, _ = enc.encode({n: getattr(tex, n) for n in ARRAYS}, tex.voxel_size)
-    parent = members["entry_parent"]
+    parent = parents(tex, members)
     assert np.mean(parent > 0) > 0.95
     b = DEFAULT_BITS.depth
     depth = enc.from_planes(members["entry_centroid"], 3, enc._width(max(b, DEFAULT_BITS.centroid)))[0]
@@ -672,3 +762,140 @@ def test_centroid_frame_steps_cover_the_voxel_and_keep_its_middle_and_faces(bits
     exact = slice(None) if bits > 2 else slice(0, 1)  # 2 bits: the middle only
     np.testing.assert_allclose(got[exact, 0], f[exact, 0], atol=1e-15)
     np.testing.assert_allclose(got[:, 1:], f[:, 1:], atol=1e-15)
+
+
+def test_version_4_compact_file_still_loads():
+    """tests/data/small_tree_v4.a3d was written by the version 4 writer (every
+    direction and depth at the field's bits, no shift tables), and
+    small_tree_v4_decoded.a3d (exact encoding) holds what that writer's
+    decoder gave for it: version 5's decoder must give exactly those arrays."""
+    f = read_texture_file(DATA / "small_tree_v4.a3d")
+    assert f.version == 4 and f.encoding == "compact"
+    with zipfile.ZipFile(DATA / "small_tree_v4.a3d") as zf:
+        params = json.loads(zf.read("header.json"))["params"]
+    assert "normal_shifts" not in params and "depth_shifts" not in params
+    ref = read_texture_file(DATA / "small_tree_v4_decoded.a3d")
+    assert ref.version == 4 and ref.encoding == "exact"
+    for name in ARRAYS:
+        a, b = f.arrays[name], ref.arrays[name]
+        assert a.dtype == b.dtype and a.shape == b.shape, name
+        np.testing.assert_array_equal(a, b, err_msg=name)
+    back = AnisoTexture.load(DATA / "small_tree_v4.a3d")
+    assert back.meta[QUANTISED] == 4 and back.meta["source"] == "v4-fixture"
+    # and today's encoding of the same texture is a version 5 one, with shifts
+    members, params = enc.encode(dict(ref.arrays), ref.voxel_size)
+    assert max(params["normal_shifts"]) > 0 and max(params["depth_shifts"]) > 0
+
+
+@pytest.mark.parametrize("bits", [DEFAULT_BITS, Bits(normal=6, depth=6, coherence=3), Bits(normal=16, depth=16)])
+@pytest.mark.parametrize("span", [None, 0.8, 1.7])
+def test_spread_normals_get_the_coarsest_step_within_their_share(bits, span):
+    """Per length code q, the direction's and the depth's shift: 0 for flat
+    facets (q = 0); otherwise the coarsest step whose error stays within the
+    share of the facets' spread sigma = sqrt(2) q / (2**bits - 1), checked
+    against the closed-form errors (the next coarser step would exceed it,
+    or the codes are down to 2 bits)."""
+    full = bits.normal if span is not None else enc.oct_bits(bits)
+    top = 2**bits.coherence - 1
+    shifts, dshifts = enc.normal_shifts(bits, span), enc.depth_shifts(bits)
+    assert len(shifts) == len(dshifts) == top + 1 and shifts[0] == dshifts[0] == 0
+    assert np.all(np.diff(shifts) >= 0) and np.all(np.diff(dshifts) >= 0) and shifts[-1] > 0 and dshifts[-1] > 0
+    m = lambda b: 2 ** (b - 1) - 1  # noqa: E731
+    err = lambda b: (3.0 if span is None else span) / (np.sqrt(2) * m(b))  # noqa: E731
+    derr = lambda b: 1 / (2 * max(1, 2 * math.floor(m(b) / math.sqrt(3))))  # noqa: E731
+    for q in range(top + 1):
+        sigma = np.sqrt(2) * q / top
+        for s, e, b, share in ((shifts[q], err, full, enc.NORMAL_SPREAD_SHARE),
+                               (dshifts[q], derr, bits.depth, enc.DEPTH_SPREAD_SHARE / 2)):  # fmt: skip
+            assert s == 0 or e(b - s) <= share * sigma
+            assert b - s == 2 or e(b - s - 1) > share * sigma
+
+
+def test_spread_entries_make_the_file_smaller_and_flat_ones_keep_their_codes(tree_tex, monkeypatch):
+    """The shifts pay: the tree's file without them (shares 0) is larger;
+    entries of flat facets decode to the same values either way."""
+    arrays = {n: getattr(tree_tex, n) for n in ARRAYS}
+    with_shifts = tree_tex.as_stored()
+    size = encoded_size(arrays, tree_tex.voxel_size, {})
+    monkeypatch.setattr(enc, "NORMAL_SPREAD_SHARE", 0.0)
+    monkeypatch.setattr(enc, "DEPTH_SPREAD_SHARE", 0.0)
+    members, params = enc.encode(arrays, tree_tex.voxel_size)
+    assert not any(params["normal_shifts"]) and not any(params["depth_shifts"])
+    without = tree_tex.as_stored()
+    assert size < 0.98 * encoded_size(arrays, tree_tex.voxel_size, {})
+    flat = np.linalg.norm(tree_tex.entry_normal, axis=1) >= 1 - 1e-7
+    for name in ("entry_normal", "entry_centroid", "entry_area", "entry_kd"):
+        np.testing.assert_array_equal(getattr(with_shifts, name)[flat], getattr(without, name)[flat], err_msg=name)
+    assert not np.array_equal(with_shifts.entry_normal[~flat], without.entry_normal[~flat])
+
+
+def test_stored_orders_lose_nothing(tree_tex):
+    """Version 5 stores depths grouped by their bits, the children's in-plane
+    codes in order of their sources' centroids (or entry order), areas in
+    order of their normal's length (or entry order), shininess and kd in
+    order of ks: orders only. The
+    centroids decode to exactly what the same codes in entry order give, kd
+    and areas to what quantising them alone gives."""
+    arrays = {n: getattr(tree_tex, n) for n in ARRAYS}
+    members, params = enc.encode(arrays, tree_tex.voxel_size)
+    got = enc.decode(members, params, tree_tex.voxel_size)
+    coords, shape = tree_tex.coords.astype(np.int64), np.asarray(tree_tex.shape, np.int64)
+    voxel, direction, k = tree_tex.entry_voxel, tree_tex.entry_direction, len(tree_tex.directions)
+    parent = parents(tree_tex, members)
+    src = enc._copy_sources(parent, coords, shape, voxel, direction, k)
+    assert np.mean(src != np.arange(tree_tex.n_entries)) > 0.2
+    unit = got["entry_normal"].astype(np.float64)
+    unit /= np.linalg.norm(unit, axis=1, keepdims=True)
+    q = enc._encode_spread(np.minimum(np.linalg.norm(got["entry_normal"], axis=1), 1.0), DEFAULT_BITS.coherence)[0]
+    db = DEFAULT_BITS.depth - np.asarray(params["depth_shifts"])[q]
+    assert len(np.unique(db)) > 1
+    args = (tree_tex.origin, tree_tex.voxel_size, coords, voxel)
+    codes, back = {}, {}
+    for layout in (None, *enc.CENTROID_LAYOUTS):
+        codes[layout] = enc._encode_centroid_frame(tree_tex.entry_centroid, *args, unit, src, DEFAULT_BITS, db,
+                                                   layout)  # fmt: skip
+        back[layout] = enc._decode_centroid_frame(codes[layout], *args, unit, tangent_frame(unit), src,
+                                                  DEFAULT_BITS, db, layout)  # fmt: skip
+        # (the decoder's unit normals are float64 from their codes: within rounding of these)
+        np.testing.assert_allclose(back[layout], got["entry_centroid"], rtol=0, atol=1e-6 * tree_tex.voxel_size)
+    for layout in enc.CENTROID_LAYOUTS:
+        assert not np.array_equal(codes[layout], codes[None]) and np.array_equal(back[layout], back[None])
+    # the tree's leaves pack smaller in their sources' order
+    assert params["centroid_layout"] == "sources"
+    x = tree_tex.entry_kd.astype(np.float64).T
+    kd_codes, kd_range = enc._encode_range(x, DEFAULT_BITS.kd)
+    alone = enc._decode_range(kd_codes, DEFAULT_BITS.kd, kd_range).T.astype(np.float32)
+    np.testing.assert_array_equal(got["entry_kd"], alone)
+    area_codes, span = enc._encode_log(tree_tex.entry_area, DEFAULT_BITS.area)
+    np.testing.assert_array_equal(got["entry_area"], enc._decode_log(area_codes, DEFAULT_BITS.area, span))
+
+
+def test_each_file_keeps_the_smaller_layout(tree_tex, monkeypatch):
+    """Centroids' in-plane rows and areas are laid out in entry order or in a
+    predicted order, whichever packs smaller (LZMA's fastest preset):
+    checked against both layouts made here, and each decodes to the same
+    texture."""
+    arrays = {n: getattr(tree_tex, n) for n in ARRAYS}
+    members, params = enc.encode(arrays, tree_tex.voxel_size)
+    got = enc.decode(members, params, tree_tex.voxel_size)
+    length = np.linalg.norm(tree_tex.entry_normal.astype(np.float64), axis=1)
+    q = enc._encode_spread(np.minimum(length, 1.0), DEFAULT_BITS.coherence)[0]
+    area_codes, _ = enc._encode_log(tree_tex.entry_area, DEFAULT_BITS.area)
+    laid = {"entries": enc.to_planes(area_codes, 2),
+            "length": enc.to_planes(area_codes[np.argsort(q, kind="stable")], 2)}  # fmt: skip
+    assert params["area_order"] == min(laid, key=lambda o: enc._packed(laid[o]))
+    assert np.array_equal(members["entry_area"], laid[params["area_order"]])
+    for layout in enc.CENTROID_LAYOUTS:
+        for order in enc.AREA_ORDERS:
+            monkeypatch.setattr(enc, "CENTROID_LAYOUTS", (layout,))
+            monkeypatch.setattr(enc, "AREA_ORDERS", (order,))
+            m, p = enc.encode(arrays, tree_tex.voxel_size)
+            assert p["centroid_layout"] == layout and p["area_order"] == order
+            if layout == params["centroid_layout"]:
+                assert np.array_equal(m["entry_centroid"], members["entry_centroid"])
+            else:
+                assert enc._packed(m["entry_centroid"]) >= enc._packed(members["entry_centroid"])
+            monkeypatch.undo()
+            back = enc.decode(m, p, tree_tex.voxel_size)
+            for name in ARRAYS:
+                np.testing.assert_array_equal(back[name], got[name], err_msg=name)

@@ -1,4 +1,4 @@
-"""The compact encoding of a texture: what an ``.a3d`` file of version 4 stores.
+"""The compact encoding of a texture: what an ``.a3d`` file of version 5 stores.
 
 In memory a texture keeps float64 and float32 arrays, about 400 bytes per
 occupied voxel of the default tree. To store it, each field is quantised no
@@ -15,16 +15,20 @@ field                       stored as                                           
 ==========================  ======================================================  ===============================
 origin, shape, directions   as they are                                             exact
 coords                      sorted cell keys, delta-coded, in byte planes           exact
-entry_offsets, _direction   one bit per voxel and sample direction (M, K/8)         exact
+entry_offsets, _direction   one bit per voxel and sample direction (version 5: the  exact
+                            odd voxels' bits in order of their neighbours')
 entry_parent                per entry, 0 or which of 13 earlier neighbours it       exact
-                            copies normal and materials from (see below)
+                            copies normal and materials from (see below; version
+                            5: its rank among those with an entry there)
 entry_area                  log2, 11 bits, over [max / 2**24, max]                  relative 0.41 %
 entry_normal (direction)    about the sample direction N_p, 10 bits a coordinate,   0.14 degrees (0.07 at K = 16);
-                            or octahedral with 12, whichever deflates smaller       0.06 degrees
+                            or octahedral with 12, whichever deflates smaller;      0.06 degrees; spread normals:
+                            fewer bits for spread normals (version 5, below)        sigma / 16 or that
 entry_normal (length) c     6 bits of sqrt(1 - c), steps of 1/63                    sqrt(1 - c) within 1/126
 entry_centroid              in the frame of the decoded normal: depth along it,     depth h/1180 (10 bits),
                             10 bits, and two tangent coordinates, 6 bits each, on   h/68 in the plane; the
-                            [-sqrt(3)/2, sqrt(3)/2] h about the voxel centre        voxel's middle exact
+                            [-sqrt(3)/2, sqrt(3)/2] h about the voxel centre        voxel's middle exact;
+                            (version 5: fewer depth bits for spread normals)        spread: sigma h / 32 or that
 entry_kd                    9 bits: steps of S/511 over the values' own range,      S/1022
                             S = max(1, largest value)
 entry_ks                    8 bits, likewise                                        S/510
@@ -32,6 +36,33 @@ entry_shininess             8 bits of log2(1 + n), likewise, S = log2(1 + larges
 entry_cover (version 4)     6 bits of 2 (1 - c), c in [0.5, 1]                     1/252; 1 exact
 density                     F (see below), plus D - F in 3 bits of A_v              min(|D - F|, A_v / 14)
 ==========================  ======================================================  ===============================
+
+**Spread normals** (version 5). A mean normal of length c < 1 averages
+facets whose normals spread about it by about ``sigma = sqrt(2 (1 - c))``
+radians: scattered foliage, where most entries mix leaves of unrelated
+directions. Its direction is stored no finer than ``sigma / 16``
+(:data:`NORMAL_SPREAD_SHARE`) and its centroid's depth no finer than
+``sigma h / 32`` (:data:`DEPTH_SPREAD_SHARE` of the ``sigma h / 2`` by
+which such facets lie off their plane), or the field's bits where those are
+coarser: a table per length code of how many bits fewer (``params``
+``normal_shifts`` and ``depth_shifts``). Flat facets (c = 1) keep every bit;
+smooth surfaces nearly all.
+
+**Orders** (version 5). Members are laid out so that LZMA, which adapts to
+what it has just seen, meets runs of alike codes; each order is one the
+decoder rebuilds from what it has decoded before, so nothing is lost: the
+odd voxels' occupancy bits (every face of theirs touches even voxels) in
+order of how many face neighbours have an entry at that direction;
+``entry_parent`` as a rank among the neighbours that do, for entries that
+have any, in order of how many; directions grouped by shift and sample
+direction; shininess and kd by ks (a material's values together); depths by
+their bits; a parentless entry's depth from where the line through its
+in-plane point enters the voxel. Two orders help scattered leaves and hurt
+smooth surfaces, whose neighbouring voxels follow each other in entry order:
+the children's in-plane centroid codes in order of their source's centroid
+seen from their voxel (a leaf continuing across a face), and areas by their
+normal's length code; the encoder keeps whichever of that and entry order
+packs smaller (``params`` ``centroid_layout``, ``area_order``).
 
 **Copying from a neighbour** (version 3). A leaf, a blade or a bar that
 crosses several voxels leaves in each an entry with the same sample
@@ -70,7 +101,8 @@ Every field's quantiser is a pair of functions here (``_encode_*`` and
 ``_decode_*``); :func:`encode` and :func:`decode` run them all. A code array
 of b bits is one uint8 (b <= 8) or uint16 array, stored as byte planes (all
 low bytes, then all high bytes) so that the mostly empty high bytes compress
-away. :func:`decode` also reads version 2's layout (no ``entry_parent``, every
+away. :func:`decode` also reads versions 3 and 4 (every entry at the
+field's bits, members in entry order) and version 2's layout (no ``entry_parent``, every
 entry's codes stored, centroids as ``round(62 f)`` per axis of the offset f
 in the voxel).
 
@@ -84,6 +116,7 @@ ranges are clamped to them.
 
 from __future__ import annotations
 
+import lzma
 import math
 import zlib
 from dataclasses import asdict, dataclass
@@ -111,7 +144,7 @@ MEMBERS_V2 = ("origin", "shape", "directions", "coords", "entry_mask", "entry_ar
 #: neighbour's (:func:`_copy_parents`); the fields it names are then stored
 #: for the other entries only.
 MEMBERS_V3 = (*MEMBERS_V2[:5], "entry_parent", *MEMBERS_V2[5:])
-#: Version 4's: version 3's and ``entry_cover``.
+#: Version 4's and 5's: version 3's and ``entry_cover``.
 MEMBERS = (*MEMBERS_V3, "entry_cover")
 #: Fields (members) an entry with a parent copies from it instead of storing.
 COPIED = ("entry_normal", "entry_coherence", "entry_kd", "entry_ks", "entry_shininess")
@@ -263,6 +296,67 @@ def _decode_mask(mask: np.ndarray, m: int, k: int) -> tuple[np.ndarray, np.ndarr
     return offsets, d.astype(np.int32)
 
 
+#: The six face neighbours of a voxel (:func:`_mask_contexts`).
+FACES = np.array([(-1, 0, 0), (1, 0, 0), (0, -1, 0), (0, 1, 0), (0, 0, -1), (0, 0, 1)], dtype=np.int64)
+
+
+def _mask_contexts(occupied: np.ndarray, coords: np.ndarray, shape: np.ndarray, which: np.ndarray) -> np.ndarray:
+    """(len(which), K) context of each sample direction of the voxels
+    ``which``: ``8 n + f``, n of their face neighbours occupied at that
+    direction (``occupied`` (M, K) read at the neighbours only) and f of them
+    voxels at all."""
+    keys = cell_keys(coords, shape)
+    ctx = np.zeros((len(which), occupied.shape[1]), dtype=np.int64)
+    for off in FACES:  # six
+        cell = coords[which] + off
+        inside = np.all((cell >= 0) & (cell < shape), axis=1)
+        key = cell_keys(np.clip(cell, 0, shape - 1), shape)
+        i = np.minimum(np.searchsorted(keys, key), max(len(keys) - 1, 0))
+        hit = inside & (keys[i] == key) if len(keys) else np.zeros(len(which), bool)
+        ctx += 8 * (hit[:, None] & occupied[i]) + hit[:, None]
+    return ctx
+
+
+def _encode_mask_split(offsets: np.ndarray, direction: np.ndarray, k: int, coords: np.ndarray,
+                       shape: np.ndarray) -> np.ndarray:  # fmt: skip
+    """(1, L) uint8: version 5's occupancy. The voxels whose ``i + j + k`` is
+    even store their mask rows as :func:`_encode_mask` does; the odd ones'
+    faces all touch even voxels, so each of their bits is stored in order of
+    its context (:func:`_mask_contexts`: how many face neighbours are
+    voxels and have an entry at that direction), bits packed. A surface
+    continuing across a face makes a bit with occupied neighbours nearly
+    always set, one without nearly always clear: the runs compress."""
+    rows = _encode_mask(offsets, direction, k)
+    occupied = np.unpackbits(rows, axis=1, count=k).astype(bool)
+    odd = np.flatnonzero(coords.sum(axis=1) % 2 == 1)
+    ctx = _mask_contexts(occupied, coords, shape, odd)
+    bits = occupied[odd].ravel()[_by_shift(ctx.ravel())]
+    return np.concatenate([rows[coords.sum(axis=1) % 2 == 0].ravel(), np.packbits(bits)])[None]
+
+
+def _decode_mask_split(mask: np.ndarray, m: int, k: int, coords: np.ndarray,
+                       shape: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """The inverse of :func:`_encode_mask_split`: (offsets, direction) as :func:`_decode_mask`."""
+    nb = (k + 7) // 8
+    even = coords.sum(axis=1) % 2 == 0
+    ne, no = int(even.sum()), int(m - even.sum())
+    if mask.shape != (1, ne * nb + (no * k + 7) // 8):
+        raise FormatError(f"entry_mask has shape {mask.shape}, expected {(1, ne * nb + (no * k + 7) // 8)}")
+    rows = np.zeros((m, nb), dtype=np.uint8)
+    rows[even] = mask[0, : ne * nb].reshape(ne, nb)
+    occupied = np.unpackbits(rows, axis=1, count=k).astype(bool) if m else np.zeros((0, k), bool)
+    odd = np.flatnonzero(~even)
+    ctx = _mask_contexts(occupied, coords, shape, odd)
+    packed = mask[0, ne * nb :]
+    if np.any(np.unpackbits(packed)[no * k :]):
+        raise FormatError("entry_mask sets bits past the last sample direction")
+    flat = np.empty(no * k, dtype=bool)
+    flat[_by_shift(ctx.ravel())] = np.unpackbits(packed, count=no * k).astype(bool)
+    occupied[odd] = flat.reshape(no, k)
+    rows[odd] = np.packbits(occupied[odd], axis=1)
+    return _decode_mask(rows, m, k)
+
+
 def _encode_log(a: np.ndarray, bits: int) -> tuple[np.ndarray, list[float]]:
     """Positive values as ``1 + round((log2 a - lo) / (hi - lo) * (2**bits - 2))``
     over ``[lo, hi] = [max(log2 min, hi - AREA_SPAN), log2 max]``, 0 as 0."""
@@ -285,21 +379,32 @@ def _decode_log(codes: np.ndarray, bits: int, span: list[float]) -> np.ndarray:
     return np.where(codes > 0, value, 0.0)
 
 
-def _encode_oct(v: np.ndarray, bits: int) -> np.ndarray:
+def _half(bits) -> np.ndarray | int:
+    """``2**(bits-1) - 1``, the steps a side of a signed coordinate of ``bits``
+    bits (an int, or an array of one per entry)."""
+    if np.ndim(bits):
+        return (np.left_shift(1, np.asarray(bits, dtype=np.int64) - 1) - 1).astype(np.float64)
+    return 2 ** (bits - 1) - 1
+
+
+def _encode_oct(v: np.ndarray, bits) -> np.ndarray:
     """(2, E) codes of unit vectors ``v`` (E, 3) on the octahedron, each
     coordinate rounded symmetrically to ``2**(bits-1) - 1`` steps a side (so
-    0 and +-1, the axes, are exact)."""
+    0 and +-1, the axes, are exact). ``bits`` is one count or one per entry
+    (version 5: coarser for spread normals, :func:`normal_shifts`)."""
     v = np.asarray(v, dtype=np.float64)
     s = np.abs(v).sum(axis=1)
     p = v[:, :2] / np.where(s > 0, s, 1.0)[:, None]
     sign = np.where(p >= 0, 1.0, -1.0)
     p = np.where((v[:, 2] < 0)[:, None], (1.0 - np.abs(p[:, ::-1])) * sign, p)
-    m = 2 ** (bits - 1) - 1
+    m = _half(bits)
+    m = m[:, None] if np.ndim(m) else m
     return (np.round(np.clip(p, -1.0, 1.0) * m) + m).astype(np.uint16).T
 
 
-def _decode_oct(codes: np.ndarray, bits: int) -> np.ndarray:
-    m = 2 ** (bits - 1) - 1
+def _decode_oct(codes: np.ndarray, bits) -> np.ndarray:
+    m = _half(bits)
+    m = m[:, None] if np.ndim(m) else m
     p = (codes.T.astype(np.float64) - m) / m
     z = 1.0 - np.abs(p).sum(axis=1)
     sign = np.where(p >= 0, 1.0, -1.0)
@@ -308,25 +413,26 @@ def _decode_oct(codes: np.ndarray, bits: int) -> np.ndarray:
     return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
-def _encode_frame(v: np.ndarray, sample: np.ndarray, bits: int, span: float) -> np.ndarray:
+def _encode_frame(v: np.ndarray, sample: np.ndarray, bits, span: float) -> np.ndarray:
     """(2, E) codes of unit vectors ``v`` (E, 3) as the point where they meet
     the plane tangent to their sample direction ``sample`` (E, 3) at distance 1
     (gnomonic coordinates along :func:`~aniso3d.grid.tangent_frame`), each
     rounded to ``2**(bits-1) - 1`` steps on ``[-span, span]``. Needs
     ``v . sample > 0``; registration puts every mean normal inside its sample
-    direction's Voronoi cell, so the coordinates stay small."""
+    direction's Voronoi cell, so the coordinates stay small. ``bits`` is one
+    count or one per entry."""
     t, b = tangent_frame(sample)
     c = np.sum(v * sample, axis=1)
     g = np.stack([np.sum(v * t, axis=1), np.sum(v * b, axis=1)]) / c
-    m = 2 ** (bits - 1) - 1
+    m = _half(bits)
     scaled = g / span if span > 0 else np.zeros_like(g)
     return (np.round(np.clip(scaled, -1.0, 1.0) * m) + m).astype(np.uint16)
 
 
-def _decode_frame(codes: np.ndarray, sample: np.ndarray, bits: int, span: float, frame=None) -> np.ndarray:
+def _decode_frame(codes: np.ndarray, sample: np.ndarray, bits, span: float, frame=None) -> np.ndarray:
     """The inverse of :func:`_encode_frame`; ``frame`` is ``tangent_frame(sample)``
     when already known (a sample direction's rows, gathered)."""
-    m = 2 ** (bits - 1) - 1
+    m = _half(bits)
     g = (codes.astype(np.float64) - m) / m * span
     t, b = tangent_frame(sample) if frame is None else frame
     v = sample + g[0][:, None] * t + g[1][:, None] * b
@@ -353,17 +459,103 @@ def oct_bits(bits: Bits) -> int:
     return min(16, bits.normal + 2)
 
 
+#: Version 5's orders of ``entry_area`` (``params["area_order"]``): entry
+#: order, or by the normal's length code (:func:`_by_shift`).
+AREA_ORDERS = ("entries", "length")
+
+
+def _packed(planes: np.ndarray) -> int:
+    """Bytes of byte planes once compressed by LZMA's fastest preset: the
+    encoder's quick measure when it chooses between layouts that the file's
+    LZMA then compresses (deflate ranks some differently: a sphere's areas)."""
+    return len(lzma.compress(np.ascontiguousarray(planes).tobytes(), format=lzma.FORMAT_RAW,
+                             filters=[{"id": lzma.FILTER_LZMA1, "preset": 1}]))  # fmt: skip
+
+
 def _deflated(codes: np.ndarray, bits: int) -> int:
     """Bytes of ``codes`` as stored byte planes once deflated (zlib's default level)."""
     return len(zlib.compress(to_planes(codes, _width(bits)).tobytes()))
 
 
 def _decode_unit_normal(codes: np.ndarray, bits: Bits, span: float | None, sample: np.ndarray,
-                        frame=None) -> np.ndarray:  # fmt: skip
-    """(E, 3) float64 unit normals from their direction codes (2, E)."""
+                        frame=None, shift: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+    """(E, 3) float64 unit normals from their direction codes (2, E), each
+    ``shift`` (E,) bits coarser than ``bits`` say (version 5; None: 0)."""
+    nb = oct_bits(bits) if span is None else bits.normal
+    if shift is not None:
+        nb = nb - np.asarray(shift, dtype=np.int64)
     if span is None:
-        return _decode_oct(codes, oct_bits(bits))
-    return _decode_frame(codes, sample, bits.normal, span, frame)
+        return _decode_oct(codes, nb)
+    return _decode_frame(codes, sample, nb, span, frame)
+
+
+#: A spread mean normal's direction is stored no finer than this fraction of
+#: its facets' angular spread about it (:func:`normal_shifts`).
+NORMAL_SPREAD_SHARE = 1 / 16
+
+
+def direction_error(bits: int, span: float | None) -> float:
+    """The largest angle (radians) between a unit normal and its direction
+    codes of ``bits`` bits decoded: half a step on each of two coordinates,
+    about the sample direction (gnomonic, ``span``; an angle is never larger
+    than its gnomonic offset) or octahedral (``span`` None; the map
+    stretches by at most 3)."""
+    return (3.0 if span is None else span) / (math.sqrt(2.0) * (2 ** (bits - 1) - 1))
+
+
+#: A spread entry's centroid depth is stored no finer than this fraction of
+#: how far its facets lie off its plane (:func:`depth_shifts`).
+DEPTH_SPREAD_SHARE = 1 / 16
+
+
+def depth_shifts(bits: Bits) -> list[int]:
+    """Per normal-length code q, how many bits coarser than ``bits.depth``
+    a centroid's depth is stored (version 5). Facets whose normals spread by
+    sigma about their mean (:func:`normal_shifts`) across a voxel lie up to
+    about ``sigma h / 2`` off the plane through their centroid: the plane
+    stands for them only that well, and its depth is kept within
+    ``DEPTH_SPREAD_SHARE`` of that (never coarser than 2 bits)."""
+    return _coarsest(bits.depth, lambda b: 1 / (2 * _steps(b)[1]), DEPTH_SPREAD_SHARE / 2, bits.coherence)
+
+
+def _by_shift(shift: np.ndarray, then: np.ndarray | None = None) -> np.ndarray:
+    """The order in which version 5 stores codes that it groups by another
+    field's codes ``shift`` (directions by their shift and sample direction,
+    depths by their bits, areas by their normal's length, shininess and kd
+    by ks): by ``shift``, then ``then``, stable, so the decoder, which has
+    those first, puts them back."""
+    key = np.asarray(shift, dtype=np.int64)
+    if then is not None:
+        then = np.asarray(then, dtype=np.int64)
+        key = key * (int(then.max(initial=0)) + 1) + then
+    if len(key) and 0 <= key.min() and key.max() < 2**16:
+        key = key.astype(np.uint16)  # NumPy's stable sort of small integers is a radix sort
+    return np.argsort(key, kind="stable")
+
+
+def normal_shifts(bits: Bits, span: float | None) -> list[int]:
+    """Per normal-length code q (:func:`_encode_spread`), how many bits
+    coarser than the field's the direction of a mean normal of that length
+    is stored (version 5). A mean normal of length c averages facets whose
+    normals spread about it by about ``sigma = sqrt(2 (1 - c))`` radians (two
+    facets sigma either side: exactly, to first order; a cone: its RMS
+    angle), a spread that the volume's sheets bend by and the shading
+    averages over. Its direction is kept within ``NORMAL_SPREAD_SHARE``
+    sigma (and never coarser than 2 bits): most entries of scattered
+    foliage mix leaves of unrelated directions and need far fewer bits;
+    flat and smooth surfaces (q = 0, or a few) keep all of theirs."""
+    full = oct_bits(bits) if span is None else bits.normal
+    return _coarsest(full, lambda b: direction_error(b, span), NORMAL_SPREAD_SHARE, bits.coherence)
+
+
+def _coarsest(full: int, error, share: float, coherence_bits: int) -> list[int]:
+    """Per length code q, the most bits below ``full`` (down to 2) whose
+    ``error(bits)`` stays within ``share`` times the spread of that code,
+    ``sqrt(2) q / (2**coherence_bits - 1)`` (``error`` grows as bits drop)."""
+    top = 2**coherence_bits - 1
+    sigma = math.sqrt(2.0) * np.arange(top + 1) / top
+    err = np.array([error(b) for b in range(full - 1, 1, -1)])  # shifts 1, 2, ... (at most 15)
+    return np.sum(err[None, :] <= share * sigma[:, None], axis=1).tolist()
 
 
 def _encode_spread(length: np.ndarray, bits: int) -> np.ndarray:
@@ -391,15 +583,17 @@ def _decode_normal(
     span: float | None,
     sample: np.ndarray | None,
     unit: np.ndarray | None = None,
+    shift: np.ndarray | None = None,
 ) -> np.ndarray:
     """(E, 3) float32 mean normals from their direction codes (2, E), in the
     sample frame (``span``) or octahedral (``span`` None), or their unit
     directions ``unit`` when already decoded, and length codes (1, E): of
     :func:`_encode_spread` when ``length_range`` is None (version 3), else
     on ``length_range`` (version 2). float32 as built; F is computed from
-    these very values by encoder and decoder, so that decoded D >= F exactly."""
+    these very values by encoder and decoder, so that decoded D >= F exactly.
+    ``shift``: see :func:`_decode_unit_normal`."""
     if unit is None:
-        unit = _decode_unit_normal(codes, bits, span, sample)
+        unit = _decode_unit_normal(codes, bits, span, sample, shift=shift)
     if length_range is None:
         scale = _decode_spread(length, bits.coherence)
     else:
@@ -489,16 +683,21 @@ def _steps(bits: int) -> tuple[int, int]:
     half diagonal), ``m = 2**(bits-1) - 1`` and ``s`` the largest even number
     with ``s sqrt(3)/2 <= m``: 0 and +-1/2 (the voxel's middle and faces)
     are exact. (2 bits: ``s = 1``, codes -1, 0, 1 voxel, clamped into it.)"""
+    if np.ndim(bits):  # one count per entry (version 5's coarser depths)
+        m = np.left_shift(1, np.asarray(bits, dtype=np.int64) - 1) - 1
+        return m, np.maximum(1, 2 * np.floor(m / math.sqrt(3.0)).astype(np.int64))
     m = 2 ** (bits - 1) - 1
     return m, max(1, 2 * math.floor(m / math.sqrt(3.0)))
 
 
-def _frame_offsets(codes: np.ndarray, unit: np.ndarray, t: np.ndarray, b: np.ndarray, bits: Bits) -> np.ndarray:
+def _frame_offsets(codes: np.ndarray, unit: np.ndarray, t: np.ndarray, b: np.ndarray, bits: Bits,
+                   depth_bits=None) -> np.ndarray:  # fmt: skip
     """(E, 3) offsets from the voxel centre, in voxels, of centroid codes
     (3, E) (depth along the unit normal, then the two tangent coordinates
     along ``t`` and ``b``, :func:`~aniso3d.grid.tangent_frame` of it),
-    clamped into the voxel."""
-    md, sd = _steps(bits.depth)
+    clamped into the voxel. ``depth_bits``: the depth codes' bits, one per
+    entry (version 5), else ``bits.depth``."""
+    md, sd = _steps(bits.depth if depth_bits is None else depth_bits)
     mp, sp = _steps(bits.centroid)
     d = (codes[0].astype(np.float64) - md) / sd
     u = (codes[1].astype(np.float64) - mp) / sp
@@ -506,13 +705,53 @@ def _frame_offsets(codes: np.ndarray, unit: np.ndarray, t: np.ndarray, b: np.nda
     return np.clip(d[:, None] * unit + u[:, None] * t + v[:, None] * b, -0.5, 0.5)
 
 
-def _depth_codes(f: np.ndarray, unit: np.ndarray, bits: int) -> np.ndarray:
+def _depth_codes(f: np.ndarray, unit: np.ndarray, bits) -> np.ndarray:
     """Depth codes (E,) int64 of offsets ``f`` (E, 3) from the voxel centre along ``unit`` (E, 3)."""
     m, s = _steps(bits)
     return m + np.clip(np.round(np.sum(f * unit, axis=1) * s), -m, m).astype(np.int64)
 
 
-def _encode_centroid_frame(centroid, origin, voxel_size, coords, voxel, unit, parent_src, bits) -> np.ndarray:
+def _plane_orders(at: np.ndarray, t: np.ndarray, b: np.ndarray, child: np.ndarray, e: int,
+                  bits: Bits) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Version 5's order of the two in-plane centroid rows: first the
+    entries without a parent, in order, then the children in order of their
+    source's centroid as seen from their voxel, ``at`` (its code along ``t``,
+    along ``b``; stable). A leaf continuing across a face puts its centroid
+    near its source's: each run of one predicted code holds a narrow spread."""
+    _, sp = _steps(bits.centroid)
+    root = np.setdiff1d(np.arange(e), child, assume_unique=True)
+    tc, bc = t[child], b[child]
+    up = np.round(np.sum(at * tc, axis=1) * sp)
+    vp = np.round(np.sum(at * bc, axis=1) * sp)
+    return (np.concatenate([root, child[np.argsort(up, kind="stable")]]),
+            np.concatenate([root, child[np.argsort(vp, kind="stable")]]))  # fmt: skip
+
+
+def _chord_start(codes: np.ndarray, unit: np.ndarray, t: np.ndarray, b: np.ndarray, bits: Bits,
+                 depth_bits: np.ndarray) -> np.ndarray:  # fmt: skip
+    """(E,) int64 depth code just below where the line through each
+    centroid's in-plane point (its codes 1 and 2), along its normal, enters
+    the voxel: version 5 stores a parentless entry's depth from there
+    (modulo its bits). Oblique planes cut a chord shorter than the voxel's
+    extent along the normal, so the codes from its start span fewer values."""
+    mp, sp = _steps(bits.centroid)
+    md, sd = _steps(depth_bits)
+    p0 = ((codes[1] - mp) / sp)[:, None] * t + ((codes[2] - mp) / sp)[:, None] * b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        enter = np.where(unit != 0, (np.where(unit > 0, -0.5, 0.5) - p0) / unit, -np.inf).max(axis=1)
+    lo = np.floor(np.clip(enter, -1.0, 1.0) * sd).astype(np.int64) - 1
+    return np.clip(md + lo, 0, 2 * md)
+
+
+#: Version 5's layouts of the in-plane centroid rows (``params["centroid_layout"]``):
+#: in entry order (cell order: a smooth surface's neighbouring voxels follow
+#: each other), or :func:`_plane_orders` (scattered leaves). The encoder keeps
+#: whichever packs smaller.
+CENTROID_LAYOUTS = ("entries", "sources")
+
+
+def _encode_centroid_frame(centroid, origin, voxel_size, coords, voxel, unit, parent_src, bits,
+                           depth_bits=None, layout: str | None = None) -> np.ndarray:  # fmt: skip
     """(3, E) codes of each centroid in its entry's normal frame (version 3):
     its offset from the voxel centre along the decoded unit normal ``unit``
     (``bits.depth`` bits, within h sqrt(3) / 4 s), and in the plane
@@ -521,41 +760,83 @@ def _encode_centroid_frame(centroid, origin, voxel_size, coords, voxel, unit, pa
     in its plane. An entry with a parent (``parent_src``, its source entry, is
     not itself) lies on its source's plane when their facets are coplanar
     (a leaf across voxels): its depth is stored as the difference, modulo
-    ``2**bits.depth``, from the depth of that plane in its voxel."""
+    ``2**bits.depth``, from the depth of that plane in its voxel.
+    ``depth_bits`` (E,): each entry's depth bits (version 5: fewer for
+    spread normals, :func:`depth_shifts`; a child has its source's), else
+    ``bits.depth``. ``layout`` (version 5, one of :data:`CENTROID_LAYOUTS`;
+    None: versions 3 and 4, entry order): a parentless entry's depth is
+    stored from its chord's start (:func:`_chord_start`), the depths grouped
+    by their bits (:func:`_by_shift`), the in-plane rows in entry order or in
+    :func:`_plane_orders`."""
     f = (np.asarray(centroid, dtype=np.float64) - origin) / voxel_size - coords[voxel] - 0.5
     f = np.clip(f, -0.5, 0.5)
     mp, sp = _steps(bits.centroid)
     t, b = tangent_frame(unit)
+    db = np.full(len(f), bits.depth, dtype=np.int64) if depth_bits is None else np.asarray(depth_bits, np.int64)
     codes = np.empty((3, len(f)), dtype=np.int64)
-    codes[0] = _depth_codes(f, unit, bits.depth)
+    codes[0] = _depth_codes(f, unit, db)
     codes[1] = mp + np.clip(np.round(np.sum(f * t, axis=1) * sp), -mp, mp)
     codes[2] = mp + np.clip(np.round(np.sum(f * b, axis=1) * sp), -mp, mp)
     child = np.flatnonzero(parent_src != np.arange(len(f)))
+    at = np.zeros((0, 3))
     if len(child):
         root = parent_src[child]
         # The sources' centroids as decoded, seen from each child's voxel.
-        at = _frame_offsets(codes[:, root], unit[root], t[root], b[root], bits)
+        at = _frame_offsets(codes[:, root], unit[root], t[root], b[root], bits, db[root])
         at += coords[voxel[root]] - coords[voxel[child]]
-        codes[0, child] = (codes[0, child] - _depth_codes(at, unit[child], bits.depth)) % 2**bits.depth
+        dc = db[child]
+        codes[0, child] = (codes[0, child] - _depth_codes(at, unit[child], dc)) % np.left_shift(1, dc)
+    if layout is not None:
+        free = np.setdiff1d(np.arange(len(f)), child, assume_unique=True)
+        start = _chord_start(codes[:, free], unit[free], t[free], b[free], bits, db[free])
+        codes[0, free] = (codes[0, free] - start) % np.left_shift(1, db[free])
+        ou = ov = np.arange(len(f))
+        if layout == "sources":
+            ou, ov = _plane_orders(at, t, b, child, len(f), bits)
+        codes = np.stack([codes[0][_by_shift(db)], codes[1][ou], codes[2][ov]])
     return codes.astype(np.uint16)
 
 
-def _decode_centroid_frame(codes, origin, voxel_size, coords, voxel, unit, tb, parent_src, bits) -> np.ndarray:
+def _decode_centroid_frame(codes, origin, voxel_size, coords, voxel, unit, tb, parent_src, bits,
+                           depth_bits=None, layout: str | None = None) -> np.ndarray:  # fmt: skip
     """The inverse of :func:`_encode_centroid_frame`; ``tb`` is
     :func:`~aniso3d.grid.tangent_frame` of ``unit``."""
     t, b = tb
-    codes = codes.astype(np.int64)
-    child = np.flatnonzero(parent_src != np.arange(codes.shape[1]))
+    e = codes.shape[1]
+    stored = codes.astype(np.int64)
+    db = np.full(e, bits.depth, dtype=np.int64) if depth_bits is None else depth_bits
+    md, _ = _steps(db)
+    mp, _ = _steps(bits.centroid)
+    child = np.flatnonzero(parent_src != np.arange(e))
+    codes = stored if layout is None else np.empty_like(stored)
+    if layout is not None:
+        # depths back from their groups
+        codes[0, _by_shift(db)] = stored[0]
+    if codes.size and (np.any(codes[0] >= np.left_shift(1, db)) or int(stored[1:].max()) > 2 * mp):
+        raise FormatError("entry_centroid holds codes past the voxel")
+    free = np.setdiff1d(np.arange(e), child, assume_unique=True) if layout is not None else None
+    if layout == "entries":
+        codes[1:] = stored[1:]
+    elif layout == "sources":
+        # the parentless entries' in-plane codes lead both rows, in order:
+        # with their depths they give the children's order
+        codes[1:, free] = stored[1:, : len(free)]
+    if layout is not None:
+        start = _chord_start(codes[:, free], unit[free], t[free], b[free], bits, db[free])
+        codes[0, free] = (codes[0, free] + start) % np.left_shift(1, db[free])
     if len(child):
         root = parent_src[child]
-        at = _frame_offsets(codes[:, root], unit[root], t[root], b[root], bits)
+        at = _frame_offsets(codes[:, root], unit[root], t[root], b[root], bits, db[root])
         at += coords[voxel[root]] - coords[voxel[child]]
-        codes[0, child] = (codes[0, child] + _depth_codes(at, unit[child], bits.depth)) % 2**bits.depth
-    md, _ = _steps(bits.depth)
-    mp, _ = _steps(bits.centroid)
-    if codes.size and (int(codes[0].max()) > 2 * md or int(codes[1:].max()) > 2 * mp):
+        if layout == "sources":
+            ou, ov = _plane_orders(at, t, b, child, e, bits)
+            codes[1, ou[len(free) :]] = stored[1, len(free) :]
+            codes[2, ov[len(free) :]] = stored[2, len(free) :]
+        dc = db[child]
+        codes[0, child] = (codes[0, child] + _depth_codes(at, unit[child], dc)) % np.left_shift(1, dc)
+    if codes.size and np.any(codes[0] > 2 * md):
         raise FormatError("entry_centroid holds codes past the voxel")
-    return origin + (coords[voxel] + 0.5 + _frame_offsets(codes, unit, t, b, bits)) * voxel_size
+    return origin + (coords[voxel] + 0.5 + _frame_offsets(codes, unit, t, b, bits, db)) * voxel_size
 
 
 # ------------------------------------------------------------ copy prediction
@@ -600,6 +881,55 @@ def _copy_parents(coords, shape, voxel, direction, k, fields: list[np.ndarray]) 
         same = np.all(codes[:, cand] == codes[:, nb], axis=0)
         parent[cand[same]] = j
     return parent
+
+
+def _candidates(coords: np.ndarray, shape: np.ndarray, offsets: np.ndarray, voxel: np.ndarray,
+                direction: np.ndarray, k: int) -> np.ndarray:  # fmt: skip
+    """(E, 13) bool: whether the voxel at each of :data:`PARENT_OFFSETS` from
+    an entry's has an entry at its sample direction (a parent it could
+    name). Looked up per voxel, then read per entry."""
+    m = len(coords)
+    keys = cell_keys(coords, shape)
+    occupied = np.zeros((m + 1, k), dtype=bool)  # row m: no voxel
+    occupied[voxel, direction] = True
+    out = np.zeros((len(voxel), len(PARENT_OFFSETS)), dtype=bool)
+    for j, off in enumerate(PARENT_OFFSETS):  # thirteen
+        cell = coords + off
+        inside = np.all((cell >= 0) & (cell < shape), axis=1)
+        key = cell_keys(np.clip(cell, 0, shape - 1), shape)
+        i = np.minimum(np.searchsorted(keys, key), max(m - 1, 0))
+        nb = np.where(inside & (keys[i] == key), i, m) if m else np.zeros(0, np.int64)
+        out[:, j] = occupied[nb[voxel], direction]
+    return out
+
+
+def _encode_parent_ranks(parent: np.ndarray, cand: np.ndarray) -> np.ndarray:
+    """(N,) uint8, version 5's ``entry_parent``: for each entry with at least
+    one candidate (:func:`_candidates`), 0 or the rank of its parent among
+    its candidates (1 the first), in order of how many it has (stable). An
+    entry without candidates has no parent and stores nothing."""
+    n = cand.sum(axis=1)
+    j = np.maximum(parent.astype(np.int64) - 1, 0)
+    rank = np.where(parent > 0, np.take_along_axis(np.cumsum(cand, axis=1), j[:, None], axis=1)[:, 0], 0)
+    has = np.flatnonzero(n > 0)
+    return rank[has][_by_shift(n[has])].astype(np.uint8)
+
+
+def _decode_parent_ranks(ranks: np.ndarray, cand: np.ndarray) -> np.ndarray:
+    """The inverse of :func:`_encode_parent_ranks`: (E,) uint8 parents."""
+    n = cand.sum(axis=1)
+    has = np.flatnonzero(n > 0)
+    if ranks.shape != (len(has),):
+        raise FormatError(f"entry_parent has shape {ranks.shape}, expected {(len(has),)}")
+    if len(ranks) and int(ranks.max()) > len(PARENT_OFFSETS):
+        raise FormatError(f"entry_parent holds codes above {len(PARENT_OFFSETS)}")
+    rank = np.zeros(len(n), dtype=np.int64)
+    rank[has[_by_shift(n[has])]] = ranks
+    if np.any(rank > n):
+        raise FormatError("entry_parent names a neighbour without an entry in that sample direction")
+    # the rank-th candidate: the first offset whose running count reaches it
+    j = np.argmax(np.cumsum(cand, axis=1) >= np.maximum(rank, 1)[:, None], axis=1)
+    return np.where(rank > 0, j + 1, 0).astype(np.uint8)
 
 
 def _copy_sources(parent: np.ndarray, coords, shape, voxel, direction, k) -> np.ndarray:
@@ -695,21 +1025,31 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
     kd_codes, kd_range = _encode_range(np.asarray(arrays["entry_kd"]).T, bits.kd)
     ks_codes, ks_range = _encode_range(arrays["entry_ks"], bits.ks)
     sh_codes, sh_range = _encode_range(arrays["entry_shininess"], bits.shininess, log=True)
+    direction = np.asarray(arrays["entry_direction"], dtype=np.int64)
     span = _frame_span(unit, sample)
-    normal_codes = _encode_oct(unit, oct_bits(bits))
+    # Spread mean normals' directions are stored coarser (version 5): a shift
+    # per length code, written into params.
+    nb_full = oct_bits(bits)
+    table = normal_shifts(bits, None)
+    shift = np.asarray(table, dtype=np.int64)[coherence_codes[0]]
+    normal_codes = _encode_oct(unit, oct_bits(bits) - shift)
     if span is not None:
         # Smooth surfaces: spatially adjacent normals are adjacent on the
         # octahedral map, and deflate finds that; scattered facets (foliage)
         # take fewer bytes about their sample directions. Keep the smaller.
-        framed = _encode_frame(unit, sample, bits.normal, span)
-        if _deflated(framed, bits.normal) < _deflated(normal_codes, oct_bits(bits)):
-            normal_codes = framed
+        framed_table = normal_shifts(bits, span)
+        framed_shift = np.asarray(framed_table, dtype=np.int64)[coherence_codes[0]]
+        framed = _encode_frame(unit, sample, bits.normal - framed_shift, span)
+        if _deflated(framed[:, _by_shift(framed_shift, direction)], bits.normal) < _deflated(
+                normal_codes[:, _by_shift(shift, direction)], oct_bits(bits)):  # fmt: skip
+            normal_codes, table, shift, nb_full = framed, framed_table, framed_shift, bits.normal
         else:
             span = None
     params = {
         "bits": asdict(bits),
         "area_log2_range": area_span,
         "normal_frame_span": span,
+        "normal_shifts": table,
         "ranges": {"coherence": coherence_range, "kd": kd_range, "ks": ks_range, "shininess": sh_range},
     }
     members = {
@@ -717,34 +1057,54 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
         "shape": shape,
         "directions": dirs,
         "coords": _encode_keys(coords, shape),
-        "entry_mask": _encode_mask(offsets, arrays["entry_direction"], k),
-        "entry_area": to_planes(area_codes, _width(bits.area)),
-        "entry_normal": to_planes(normal_codes, _width(bits.normal)),
+        "entry_mask": _encode_mask_split(offsets, arrays["entry_direction"], k, coords, shape),
         "entry_coherence": to_planes(coherence_codes, _width(bits.coherence)),
         "entry_kd": to_planes(kd_codes, _width(bits.kd)),
         "entry_ks": to_planes(ks_codes, _width(bits.ks)),
         "entry_shininess": to_planes(sh_codes, _width(bits.shininess)),
     }
-    direction = np.asarray(arrays["entry_direction"], dtype=np.int64)
     copied = {"entry_normal": normal_codes, "entry_coherence": coherence_codes, "entry_kd": kd_codes,
               "entry_ks": ks_codes, "entry_shininess": sh_codes}  # fmt: skip
     parent = _copy_parents(coords, shape, voxel, direction, k, [copied[n] for n in COPIED])
-    members["entry_parent"] = parent
+    members["entry_parent"] = _encode_parent_ranks(parent, _candidates(coords, shape, offsets, voxel, direction, k))
     src = _copy_sources(parent, coords, shape, voxel, direction, k)
-    unit_dec = _decode_unit_normal(normal_codes, bits, span, sample)
-    centroid_codes = _encode_centroid_frame(arrays["entry_centroid"], origin, float(voxel_size), coords, voxel,
-                                            unit_dec, src, bits)  # fmt: skip
-    members["entry_centroid"] = to_planes(centroid_codes, _width(max(bits.centroid, bits.depth)))
+    unit_dec = _decode_unit_normal(normal_codes, bits, span, sample, shift=shift)
+    dtable = depth_shifts(bits)
+    params["depth_shifts"] = dtable
+    dshift = np.asarray(dtable, dtype=np.int64)[coherence_codes[0]]
+    # Both layouts of the in-plane rows; the file keeps the one that packs smaller.
+    laid = {layout: to_planes(_encode_centroid_frame(arrays["entry_centroid"], origin, float(voxel_size), coords,
+                                                     voxel, unit_dec, src, bits, bits.depth - dshift, layout),
+                              _width(max(bits.centroid, bits.depth)))
+            for layout in CENTROID_LAYOUTS}  # fmt: skip
+    params["centroid_layout"] = min(CENTROID_LAYOUTS, key=lambda layout: _packed(laid[layout]))
+    members["entry_centroid"] = laid[params["centroid_layout"]]
     roots = parent == 0
     for n in COPIED:
         members[n] = to_planes(np.atleast_2d(copied[n])[:, roots], _width(getattr(bits, _BITS_OF[n])))
+    # Directions grouped by their shift (stable): LZMA then sees codes of one
+    # range at a time, instead of a mixture that hides the coarse ones' savings.
+    members["entry_normal"] = to_planes(normal_codes[:, roots][:, _by_shift(shift[roots], direction[roots])],
+                                        _width(nb_full))  # fmt: skip
+    # Shininess and kd in the order of the ks codes: a material's values go
+    # together, so a run of one ks holds nearly one shininess, and the bark's
+    # (one colour) or a wall's kd repeat there instead of between the leaves'.
+    by_ks = _by_shift(ks_codes[0, roots])
+    members["entry_shininess"] = to_planes(sh_codes[:, roots][:, by_ks], _width(bits.shininess))
+    members["entry_kd"] = to_planes(kd_codes[:, roots][:, by_ks], _width(bits.kd))
     cover_codes = _encode_cover(arrays["entry_cover"], bits.cover)
     members["entry_cover"] = cover_codes
+    # Areas in entry order (a smooth surface's follow each other), or by their
+    # normal's length (a mix of several facets is larger): whichever packs smaller.
+    laid = {"entries": to_planes(area_codes, _width(bits.area)),
+            "length": to_planes(area_codes[_by_shift(coherence_codes[0])], _width(bits.area))}  # fmt: skip
+    params["area_order"] = min(AREA_ORDERS, key=lambda order: _packed(laid[order]))
+    members["entry_area"] = laid[params["area_order"]]
     members = {n: members[n] for n in MEMBERS if n in members}
     if bits.density:
         # The residual against F of the *decoded* entries: what decode adds back.
         area = _decode_log(area_codes, bits.area, area_span)
-        nrm = _decode_normal(normal_codes, coherence_codes, None, bits, span, sample)
+        nrm = _decode_normal(normal_codes, coherence_codes, None, bits, span, sample, shift=shift)
         f = facet_density(area * _decode_cover(cover_codes, bits.cover), nrm, offsets, dirs)
         a_v = np.bincount(voxel, weights=area, minlength=len(coords))
         residual = np.asarray(arrays["density"], dtype=np.float64) - f
@@ -762,7 +1122,7 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
     return members, params
 
 
-def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, version: int = 4
+def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, version: int = 5
            ) -> dict[str, np.ndarray]:
     """The texture arrays (every name of :data:`ARRAYS`, dtypes as
     :func:`~aniso3d.build.texture.build_texture` makes them) of a compact
@@ -789,6 +1149,23 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
         raise FormatError(f"the encoding parameters are damaged ({exc})") from None
     if len(area_span) != 2 or not all(math.isfinite(x) for x in (*area_span, 0.0 if span is None else span)):
         raise FormatError("the encoding parameters are damaged (not finite numbers)")
+    table, layout, area_order = None, None, None
+    if version >= 5:
+        table = params.get("normal_shifts")
+        full = bits.normal if span is not None else oct_bits(bits)
+        if not (isinstance(table, list) and len(table) == 2**bits.coherence and all(
+                not isinstance(x, bool) and isinstance(x, int) and 0 <= x <= full - 2 for x in table)):
+            raise FormatError("the encoding parameters are damaged (normal_shifts)")
+        layout = params.get("centroid_layout")
+        if layout not in CENTROID_LAYOUTS:
+            raise FormatError(f"the encoding parameters are damaged (centroid_layout is {layout!r})")
+        area_order = params.get("area_order")
+        if area_order not in AREA_ORDERS:
+            raise FormatError(f"the encoding parameters are damaged (area_order is {area_order!r})")
+        dtable = params.get("depth_shifts")
+        if not (isinstance(dtable, list) and len(dtable) == 2**bits.coherence and all(
+                not isinstance(x, bool) and isinstance(x, int) and 0 <= x <= bits.depth - 2 for x in dtable)):
+            raise FormatError("the encoding parameters are damaged (depth_shifts)")
     origin = _shaped(members, "origin", np.float64, (3,))
     shape = _shaped(members, "shape", np.int64, (3,))
     if np.any(shape < 1):
@@ -799,12 +1176,23 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
     k = len(dirs)
     coords = _decode_keys(_uint8(members, "coords", None), shape)
     m = len(coords)
-    offsets, direction = _decode_mask(_uint8(members, "entry_mask", None), m, k)
+    if version >= 5:
+        offsets, direction = _decode_mask_split(_uint8(members, "entry_mask", None), m, k, coords.astype(np.int64),
+                                                shape)  # fmt: skip
+    else:
+        offsets, direction = _decode_mask(_uint8(members, "entry_mask", None), m, k)
     e = len(direction)
     voxel = np.repeat(np.arange(m), np.diff(offsets))
 
     if version >= 3:
-        parent = _uint8(members, "entry_parent", (e,))
+        if version >= 5:
+            ranks = members["entry_parent"]
+            if ranks.dtype != np.uint8 or ranks.ndim != 1:
+                raise FormatError(f"entry_parent has shape {ranks.shape} and dtype {ranks.dtype}, expected uint8")
+            parent = _decode_parent_ranks(ranks, _candidates(coords.astype(np.int64), shape, offsets, voxel,
+                                                             direction, k))  # fmt: skip
+        else:
+            parent = _uint8(members, "entry_parent", (e,))
         src = _copy_sources(parent, coords.astype(np.int64), shape, voxel, direction, k)
         # A copied member holds the codes of entries without a parent, in
         # order: entry i takes row rank[src[i]] of it. Decoded for those
@@ -822,20 +1210,36 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
             raise FormatError(f"{name} holds codes above {b} bits")
         return c
 
-    area = _decode_log(codes("entry_area", 1, bits.area)[0], bits.area, area_span)
     nb = bits.normal if span is not None else oct_bits(bits)
+    coherence = codes("entry_coherence", 1, bits.coherence)
+    area_codes = codes("entry_area", 1, bits.area)[0]
+    if area_order == "length":
+        grouped, area_codes = area_codes, np.empty_like(area_codes)
+        area_codes[_by_shift(coherence[0][take])] = grouped
+    area = _decode_log(area_codes, bits.area, area_span)
+    normal_codes = codes("entry_normal", 2, nb)
+    shift = None
+    if version >= 5:
+        shift = np.asarray(table, dtype=np.int64)[coherence[0]]
+        grouped, normal_codes = normal_codes, np.empty_like(normal_codes)
+        normal_codes[:, _by_shift(shift, direction[roots])] = grouped
+        if normal_codes.size and np.any(normal_codes > 2 * (np.left_shift(1, nb - shift - 1) - 1)):
+            raise FormatError("entry_normal holds codes past their spread's range")
     # tangent frames of the K sample directions, gathered (not one per entry)
     frame = tuple(x[direction[roots]] for x in tangent_frame(dirs)) if span is not None else None
-    unit = _decode_unit_normal(codes("entry_normal", 2, nb), bits, span, dirs[direction[roots]], frame)
+    unit = _decode_unit_normal(normal_codes, bits, span, dirs[direction[roots]], frame, shift)
     length_range = None if version >= 3 else ranges["coherence"]
-    normal = _decode_normal(None, codes("entry_coherence", 1, bits.coherence), length_range, bits, span,
-                            None, unit)[take]  # fmt: skip
+    normal = _decode_normal(None, coherence, length_range, bits, span, None, unit)[take]
     if version >= 3:
         # The tangent frames of the entries that store a normal, gathered like it.
         tb = tuple(x[take] for x in tangent_frame(unit))
-        centroid = _decode_centroid_frame(codes("entry_centroid", 3, max(bits.centroid, bits.depth)), origin,
-                                          float(voxel_size), coords.astype(np.int64), voxel, unit[take], tb, src,
-                                          bits)  # fmt: skip
+        centroid_codes = codes("entry_centroid", 3, max(bits.centroid, bits.depth))
+        depth_bits = None
+        if version >= 5:
+            dshift = np.asarray(dtable, dtype=np.int64)[coherence[0][take]]
+            depth_bits = bits.depth - dshift
+        centroid = _decode_centroid_frame(centroid_codes, origin, float(voxel_size), coords.astype(np.int64), voxel,
+                                          unit[take], tb, src, bits, depth_bits, layout)  # fmt: skip
     else:
         centroid_codes = codes("entry_centroid", 3, bits.centroid)
         if centroid_codes.size and int(centroid_codes.max()) > 2**bits.centroid - 2:
@@ -844,9 +1248,18 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
             centroid_codes, origin, float(voxel_size), coords.astype(np.int64), voxel,
             bits.centroid,
         )  # fmt: skip
-    kd = _decode_range(codes("entry_kd", 3, bits.kd), bits.kd, ranges["kd"]).T[take]
-    ks = _decode_range(codes("entry_ks", 1, bits.ks), bits.ks, ranges["ks"])[0][take]
-    sh = _decode_range(codes("entry_shininess", 1, bits.shininess), bits.shininess, ranges["shininess"],
+    ks_codes = codes("entry_ks", 1, bits.ks)
+    ks = _decode_range(ks_codes, bits.ks, ranges["ks"])[0][take]
+    sh_codes = codes("entry_shininess", 1, bits.shininess)
+    kd_codes = codes("entry_kd", 3, bits.kd)
+    if version >= 5:
+        by_ks = _by_shift(ks_codes[0])
+        grouped, sh_codes = sh_codes, np.empty_like(sh_codes)
+        sh_codes[:, by_ks] = grouped
+        grouped, kd_codes = kd_codes, np.empty_like(kd_codes)
+        kd_codes[:, by_ks] = grouped
+    kd = _decode_range(kd_codes, bits.kd, ranges["kd"]).T[take]
+    sh = _decode_range(sh_codes, bits.shininess, ranges["shininess"],
                        log=True)[0][take]  # fmt: skip
     if version >= 4:
         cover_codes = _uint8(members, "entry_cover", (1, e))
