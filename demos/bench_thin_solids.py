@@ -23,9 +23,6 @@ cover. The images are deterministic: no spread to report.
 from __future__ import annotations
 
 import argparse
-import os
-import platform
-import time
 from contextlib import contextmanager
 
 import numpy as np
@@ -35,10 +32,9 @@ import aniso3d.build.mesh as mesh_module
 from aniso3d import metrics
 from aniso3d.bench.corpus import corpus_cameras
 from aniso3d.bench.outputs import markdown_table, write_between_markers
-from aniso3d.bench.run import code_version
+from aniso3d.bench.run import run_scenes
 from aniso3d.build import scenes
 from aniso3d.build.texture import build_texture
-from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.renderer import Renderer
 
 BEGIN = "<!-- bench_thin_solids: begin -->"
@@ -116,17 +112,8 @@ def main() -> None:
     ap.add_argument("--md", default="", help="Markdown file to write the table into (between its markers)")
     args = ap.parse_args()
 
-    started, load0 = time.time(), os.getloadavg()
-    version = code_version(("aniso3d", "shaders", "demos"))
-    commit = (version["commit"] or "unknown")[:7]
-    commit += " (with uncommitted changes to the code)" if version["dirty"] else ""
-    rows = []
-    with GLContext("auto") as gl, Renderer((args.size, args.size), gl=gl) as renderer:
-        gl_name = gl.renderer
-        for name in args.scenes:
-            print(f"{name}:", flush=True)
-            rows += run_scene(name, args, renderer)
-    load1, minutes = os.getloadavg(), (time.time() - started) / 60
+    run = run_scenes(args.scenes, args.size, lambda name, renderer: run_scene(name, args, renderer))
+    rows = run.rows
 
     def cell(r, method, lw):
         p, f = r[(method, lw)]
@@ -140,10 +127,7 @@ def main() -> None:
                       f"{d['volume']:+.2f}", f"{d['splat']:+.2f}"])  # fmt: skip
     parts = [
         BEGIN,
-        f"Run {time.strftime('%Y-%m-%d %H:%M')} at commit {commit} in {minutes:.1f} min on {gl_name}, "
-        f"{platform.machine()}, {os.cpu_count()} CPUs, load average (1, 5, 15 min) "
-        f"{load0[0]:.1f} {load0[1]:.1f} {load0[2]:.1f} at the start and {load1[0]:.1f} {load1[1]:.1f} "
-        f"{load1[2]:.1f} at the end; `demos/bench_thin_solids.py {' '.join(args.scenes)} --size {args.size}`. "
+        run.header(f"demos/bench_thin_solids.py {' '.join(args.scenes)} --size {args.size}") + " "
         f"Texture {args.resolution}^3, K = {args.directions}; truth {args.gt_ssaa}x{args.gt_ssaa} polygons; "
         "PSNR (dB) / FLIP inside the object's box, as the corpus bench. Closed: the share of the mesh's faces "
         "on closed surfaces; cover: the mean entry cover (flat law). Δ: flat - off, PSNR.",

@@ -116,6 +116,48 @@ def code_version(paths: tuple[str, ...] = ()) -> dict:
     return out
 
 
+@dataclass
+class ScenesRun:
+    """What :func:`run_scenes` measured: the rows, and the run's facts for
+    its header (:meth:`header`)."""
+
+    rows: list
+    commit: str
+    gl_name: str
+    minutes: float
+    load_start: tuple[float, float, float]
+    load_end: tuple[float, float, float]
+
+    def header(self, command: str) -> str:
+        """The sentence a bench's Markdown block starts with: when, at which
+        commit, how long, on what and at what load, and ``command``."""
+        a, b = self.load_start, self.load_end
+        return (
+            f"Run {time.strftime('%Y-%m-%d %H:%M')} at commit {self.commit} in {self.minutes:.1f} min on "
+            f"{self.gl_name}, {platform.machine()}, {os.cpu_count()} CPUs, load average (1, 5, 15 min) "
+            f"{a[0]:.1f} {a[1]:.1f} {a[2]:.1f} at the start and {b[0]:.1f} {b[1]:.1f} {b[2]:.1f} at the end; "
+            f"`{command}`."
+        )
+
+
+def run_scenes(names, size: int, run_scene: Callable) -> ScenesRun:
+    """``run_scene(name, renderer)`` (a list of rows) for each scene of
+    ``names`` on one square ``size`` renderer: the demos' corpus loop. The
+    commit is the checkout's when the run starts, marked when the code (not
+    the docs being written) differs from it."""
+    started, load0 = time.time(), os.getloadavg()
+    version = code_version(("aniso3d", "shaders", "demos"))
+    commit = (version["commit"] or "unknown")[:7]
+    commit += " (with uncommitted changes to the code)" if version["dirty"] else ""
+    rows: list = []
+    with GLContext("auto") as gl, Renderer((size, size), gl=gl) as renderer:
+        gl_name = gl.renderer
+        for name in names:
+            print(f"{name}:", flush=True)
+            rows += run_scene(name, renderer)
+    return ScenesRun(rows, commit, gl_name, (time.time() - started) / 60, load0, os.getloadavg())
+
+
 def cpu_model() -> str | None:
     """The CPU's name from /proc/cpuinfo (Linux), else ``platform.processor()``."""
     try:
