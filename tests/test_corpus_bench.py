@@ -19,6 +19,7 @@ from aniso3d.bench import corpus
 from aniso3d.bench.corpus_report import FILES, TARGET_HEADERS, corpus_csv, write_corpus
 from aniso3d.build.mesh import Mesh
 from aniso3d.errors import InputError
+from aniso3d.rendering.select import needed_resolution
 
 # ------------------------------------------------------------ without a GPU
 
@@ -83,8 +84,8 @@ def _rows(override: dict | None = None) -> list[dict]:
     ms = {"mesh-1spp": 0.020, "mesh-2x2": 0.05, "mesh-4x4": 0.2, "volume": 0.010, "splat-fast": 0.01,
           "splat-high": 0.03}  # fmt: skip
     rows = []
-    for cam in (*corpus.CAMERAS, "turntable"):
-        for r in corpus.RENDERERS:
+    for cam in (*corpus.CAMERAS, corpus.AUTO_CAMERA, "turntable"):
+        for r in corpus.AUTO_RENDERERS if cam == corpus.AUTO_CAMERA else corpus.RENDERERS:
             row = {"camera": cam, "renderer": r, "status": "ok", "psnr": psnr[r], "flip": 1.0 / psnr[r]}
             if cam == "turntable":
                 row["flicker"] = 1.5 if r == "mesh-1spp" else 1.0
@@ -105,6 +106,8 @@ def test_targets_pass_and_fail_one_at_a_time():
         "volume_faster": {("close", "volume"): {"frame_s": 0.021}},
         # Close-up volume below 1-spp polygons in PSNR.
         "never_worse_1spp": {("close", "volume"): {"psnr": 24.9, "flip": 0.0}},
+        # ... and at the resolution "auto" picks, above them in PSNR but not in FLIP.
+        "never_worse_1spp_auto": {(corpus.AUTO_CAMERA, "splat-high"): {"flip": 1.0 / 24.0}},
         # High splats flicker as much as 1-spp polygons: not less.
         "less_flicker": {("turntable", "splat-high"): {"flicker": 1.5}},
     }
@@ -201,8 +204,17 @@ def test_quick_run_on_two_tiny_scenes(gl_available, tmp_path):
     settings = replace(corpus.corpus_settings("quick", size=(128, 128), frames=1, turntable=4), resolution=32)
     result = corpus.run_corpus(settings, _tiny())
     assert [s["scene"] for s in result.scenes] == ["room", "blob"]
-    assert len(result.rows) == 2 * 3 * len(corpus.RENDERERS)
+    assert len(result.rows) == 2 * (3 * len(corpus.RENDERERS) + len(corpus.AUTO_RENDERERS))
     for s, (_, mesh) in zip(result.scenes, _tiny(), strict=True):
+        # The close camera again at the resolution "auto" picks there (finer than
+        # 32^3 at 128 px: a 32^3 voxel spans several pixels), its rows marked so.
+        close = corpus.corpus_cameras(mesh, settings.size, settings.resolution)[0]
+        assert s["auto_resolution"] == needed_resolution(close.camera, settings.size, mesh.bounds) > 32
+        assert s["auto_voxel_px"] == pytest.approx(close.voxel_px * 32 / s["auto_resolution"])
+        assert s["auto_texture_bytes"] > s["texture_bytes"] and s["auto_build_s"] > 0
+        auto_rows = [r for r in result.rows if (r["scene"], r["camera"]) == (s["scene"], corpus.AUTO_CAMERA)]
+        assert sorted(r["renderer"] for r in auto_rows) == sorted(corpus.AUTO_RENDERERS)
+        assert all(r["resolution"] == s["auto_resolution"] for r in auto_rows)
         assert s["mesh_ply_bytes"] == corpus.ply_bytes(mesh)
         assert s["texture_ratio"] == pytest.approx(s["texture_bytes"] / s["mesh_ply_bytes"])
         assert s["points_bytes"] == 48 * s["n_points"] > 0
@@ -220,6 +232,13 @@ def test_quick_run_on_two_tiny_scenes(gl_available, tmp_path):
                 assert math.isfinite(row[key]), (key, row)
             assert row["frame_min_s"] <= row["frame_s"] <= row["frame_max_s"]
     by = {(r["scene"], r["camera"], r["renderer"]): r for r in result.rows}
+    for s in result.scenes:
+        # The "auto" target, recomputed from the rows it names.
+        pairs = [((corpus.AUTO_CAMERA, t), ("close", "mesh-1spp")) for t in corpus.TEXTURE_RENDERERS]
+        pairs += [(("minified", t), ("minified", "mesh-1spp")) for t in corpus.TEXTURE_RENDERERS]
+        want = all(by[(s["scene"], *a)]["psnr"] >= by[(s["scene"], *b)]["psnr"]
+                   and by[(s["scene"], *a)]["flip"] <= by[(s["scene"], *b)]["flip"] for a, b in pairs)  # fmt: skip
+        assert s["targets"]["never_worse_1spp_auto"] is want
     for scene in ("room", "blob"):
         # More samples per pixel come closer to the 8x8 truth, and flicker closer to it.
         assert by[scene, "close", "mesh-4x4"]["psnr"] > by[scene, "close", "mesh-1spp"]["psnr"]
@@ -238,9 +257,9 @@ def test_quick_run_on_two_tiny_scenes(gl_available, tmp_path):
     assert "git commit" in md
     for header in TARGET_HEADERS.values():
         assert header in md
-    # Every table has a row per scene: targets, bytes, 2 x quality, 2 x time, flicker.
+    # Every table has a row per scene: targets, bytes, 2 x quality, 2 x time, flicker, auto quality and time.
     for scene in ("room", "blob"):
-        assert sum(line.startswith(f"| {scene} |") for line in md.splitlines()) == 7
+        assert sum(line.startswith(f"| {scene} |") for line in md.splitlines()) == 9
     table = list(csv.DictReader(io.StringIO(corpus_csv(result).decode())))
     assert [t["scene"] for t in table] == ["room", "blob"]
     for t in table:
@@ -250,6 +269,8 @@ def test_quick_run_on_two_tiny_scenes(gl_available, tmp_path):
             for rend in corpus.RENDERERS:
                 assert math.isfinite(float(t[f"{cam}_{rend}_psnr"])) and float(t[f"{cam}_{rend}_frame_s"]) > 0
         assert all(math.isfinite(float(t[f"turntable_{rend}_flicker"])) for rend in corpus.RENDERERS)
+        for rend in corpus.AUTO_RENDERERS:
+            assert math.isfinite(float(t[f"{corpus.AUTO_CAMERA}_{rend}_psnr"]))
     doc = json.loads((tmp_path / "corpus_bench.json").read_text())
     assert len(doc["scenes"]) == 2 and len(doc["rows"]) == len(result.rows)
 

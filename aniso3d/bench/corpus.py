@@ -16,6 +16,12 @@ resolution and K:
   object's bounds project to, and the frame time (median, fastest and slowest
   of several frames as ``Renderer.last_frame_seconds`` times them,
   :func:`~aniso3d.bench.run.measure`);
+- **close up at the resolution ``--resolution auto`` picks** (camera
+  ``close-auto``): the close camera again, the texture renderers drawing a
+  texture built as finely as that view needs
+  (:func:`~aniso3d.rendering.select.needed_resolution`, at most 256^3), which
+  is what ``aniso3d render`` and the viewer draw by default; the fixed
+  resolution's close-up magnifies every voxel to several pixels;
 - **flicker** on a turntable at the minified distance (:func:`flicker`);
 - the **targets** (:data:`TARGETS`), pass or fail per scene.
 
@@ -50,12 +56,17 @@ from aniso3d.errors import InputError
 from aniso3d.rendering.camera import Camera, turntable
 from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.renderer import Renderer
+from aniso3d.rendering.select import needed_resolution
 
 #: The renderers measured, in table order.
 RENDERERS = ("mesh-1spp", "mesh-2x2", "mesh-4x4", "volume", "splat-fast", "splat-high")
 #: The texture renderers the targets hold to account (the defaults of ``aniso3d render``).
 TEXTURE_RENDERERS = ("volume", "splat-high")
 CAMERAS = ("close", "minified")
+#: The close camera with the texture at the resolution "auto" picks there.
+AUTO_CAMERA = "close-auto"
+#: What is drawn at :data:`AUTO_CAMERA` (the polygons are the close camera's).
+AUTO_RENDERERS = ("volume", "splat-fast", "splat-high")
 #: ``aniso3d render``'s default view (``--azimuth 30 --elevation 15 --fov 40``).
 VIEW_AZIMUTH, VIEW_ELEVATION, VIEW_FOV = 30.0, 15.0, 40.0
 #: The targets, by column name, as the report states them.
@@ -63,6 +74,8 @@ TARGETS = {
     "minified_vs_2x2": "minified: volume and high splats at least as good as 2x2 polygons (PSNR and FLIP)",
     "volume_faster": "volume frame time below 1-spp polygons (both distances)",
     "never_worse_1spp": "volume and high splats never worse than 1-spp polygons (PSNR and FLIP, both distances)",
+    "never_worse_1spp_auto": "the same, close up at the resolution `--resolution auto` picks for that view "
+                             "(minified: the corpus resolution, a voxel about a pixel there)",
     "less_flicker": "volume and high splats flicker less than 1-spp polygons",
     "bytes_fifth": "texture bytes at most 1/5 of the mesh's (binary PLY)",
 }
@@ -84,6 +97,8 @@ class CorpusSettings:
         turntable: frames of the turntable (a full turn), at least 2.
         resolution, directions: the texture (default: the build's defaults).
         splat: splat shape, drawn in "fast" and "high" quality.
+        auto_close: also draw the close camera at the resolution ``--resolution
+            auto`` picks there (:data:`AUTO_CAMERA`).
         scenes: names from :data:`aniso3d.build.scenes.CORPUS`.
     """
 
@@ -97,6 +112,7 @@ class CorpusSettings:
     resolution: int = DEFAULT_RESOLUTION
     directions: int = DEFAULT_DIRECTIONS
     splat: str = BASELINE["splat"]
+    auto_close: bool = True
     scenes: tuple[str, ...] = scenes.CORPUS
 
     def __post_init__(self) -> None:
@@ -301,6 +317,9 @@ def check_targets(rows: list[dict], texture_ratio: float) -> dict[str, bool | No
     out["volume_faster"] = _all(faster)
     out["never_worse_1spp"] = _all([_as_good(at.get((cam, t)), at.get((cam, "mesh-1spp")))
                                     for cam in CAMERAS for t in TEXTURE_RENDERERS])  # fmt: skip
+    out["never_worse_1spp_auto"] = _all([_as_good(at.get((auto, t)), at.get((cam, "mesh-1spp")))
+                                         for auto, cam in ((AUTO_CAMERA, "close"), ("minified", "minified"))
+                                         for t in TEXTURE_RENDERERS])  # fmt: skip
     less = []
     poly = at.get(("turntable", "mesh-1spp"), {}).get("flicker")
     for t in TEXTURE_RENDERERS:
@@ -314,12 +333,13 @@ def check_targets(rows: list[dict], texture_ratio: float) -> dict[str, bool | No
 # ------------------------------------------------------------------ running
 
 
-def corpus_cases(settings: CorpusSettings, camera: str) -> list[Case]:
+def corpus_cases(settings: CorpusSettings, camera: str, resolution: int | None = None) -> list[Case]:
     """The six renderings of :data:`RENDERERS` at ``camera``: the texture ones
-    at the default build (``BASELINE``) with ``settings``' resolution and K."""
-    cfg = {**BASELINE, "resolution": settings.resolution, "directions": settings.directions,
+    at the default build (``BASELINE``) with ``settings``' resolution (or
+    ``resolution``) and K; at :data:`AUTO_CAMERA` only :data:`AUTO_RENDERERS`."""
+    cfg = {**BASELINE, "resolution": resolution or settings.resolution, "directions": settings.directions,
            "splat": settings.splat}  # fmt: skip
-    return [
+    cases = [
         Case("mesh-1spp", "mesh", camera, ssaa=1),
         Case("mesh-2x2", "mesh", camera, ssaa=2),
         Case("mesh-4x4", "mesh", camera, ssaa=4),
@@ -327,6 +347,7 @@ def corpus_cases(settings: CorpusSettings, camera: str) -> list[Case]:
         replace(splat_case(camera, {**cfg, "quality": "fast"}), renderer="splat-fast"),
         replace(splat_case(camera, {**cfg, "quality": "high"}), renderer="splat-high"),
     ]
+    return [c for c in cases if c.renderer in AUTO_RENDERERS] if camera == AUTO_CAMERA else cases
 
 
 @dataclass
@@ -384,9 +405,11 @@ class _Scene:
         }
         renderer = Renderer(s.size, gl=gl)
         try:
-            for spec in cams:
-                self.still(renderer, spec, things)
+            truths = [self.still(renderer, spec, things) for spec in cams]
             summary["turntable_size"] = self.spin(renderer, cams[1], things)[0]
+            if s.auto_close:
+                del things, tex, points  # the fixed resolution's texture is done with
+                summary.update(self.auto(renderer, cams[0], truths[0]))
         finally:
             renderer.release()
         summary["targets"] = check_targets(self.rows, summary["texture_ratio"])
@@ -399,13 +422,33 @@ class _Scene:
         self.rows.append(row)
         return row
 
-    def still(self, renderer: Renderer, spec: CameraSpec, things: dict) -> None:
-        """The truth, then every renderer's image and frame times, at ``spec``."""
-        truth = renderer.render(self.mesh, spec.camera, "mesh", ssaa=self.gt_ssaa, alpha=True)
-        self.step(f"{self.name}: truth {spec.label}")
+    def auto(self, renderer: Renderer, close: CameraSpec, truth: np.ndarray) -> dict:
+        """The texture renderers at the close camera, the texture built at the
+        resolution ``--resolution auto`` picks there; its summary columns."""
+        s = self.settings
+        res = needed_resolution(close.camera, s.size, self.mesh.bounds)
+        t0 = time.perf_counter()
+        tex = build_texture(self.mesh, res, s.directions, bounds=self.mesh.bounds)
+        build_s = time.perf_counter() - t0
+        points = tex.to_points(BASELINE["placement"], BASELINE["per_entry"], BASELINE["point_normal"])
+        self.step(f"{self.name}: texture {res}^3")
+        spec = replace(close, label=AUTO_CAMERA, voxel_px=close.voxel_px * s.resolution / res)
+        self.still(renderer, spec, {"volume": tex, "splat": points}, truth=truth, resolution=res)
+        return {"auto_resolution": res, "auto_voxel_px": spec.voxel_px, "auto_texture_bytes": tex.nbytes,
+                "auto_points_bytes": points.nbytes, "auto_build_s": build_s}  # fmt: skip
+
+    def still(self, renderer: Renderer, spec: CameraSpec, things: dict, truth: np.ndarray | None = None,
+              resolution: int | None = None) -> np.ndarray:  # fmt: skip
+        """The truth (unless given), then every renderer's image and frame
+        times, at ``spec``; returns the truth."""
+        if truth is None:
+            truth = renderer.render(self.mesh, spec.camera, "mesh", ssaa=self.gt_ssaa, alpha=True)
+            self.step(f"{self.name}: truth {spec.label}")
         common = {"distance_scale": spec.scale, "voxel_px": spec.voxel_px,
                   "crop_w": spec.crop[2] - spec.crop[0], "crop_h": spec.crop[3] - spec.crop[1]}  # fmt: skip
-        for case in corpus_cases(self.settings, spec.label):
+        if resolution is not None:
+            common["resolution"] = resolution
+        for case in corpus_cases(self.settings, spec.label, resolution):
             row = self.row(spec.label, case, **common)
             try:
                 img, timing = measure(renderer, things[case.method], case, spec, self.settings)
@@ -418,6 +461,7 @@ class _Scene:
                 load = loadavg()
                 row["load_1min"] = load[0] if load else None
             self.step(f"{self.name}: {spec.label} {case.renderer}")
+        return truth
 
     def spin(self, renderer: Renderer, spec: CameraSpec, things: dict) -> tuple[int, int]:
         """The turntable at ``spec``'s distance: flicker and mean PSNR of each renderer."""
@@ -469,8 +513,10 @@ def run_corpus(
     t_start = time.perf_counter()
     load_start = loadavg()
     version = code_version()  # the code that measures, before anything can change it
-    # Texture, two truths, two cameras of renderers, the turntable, done.
-    total = max(1, n_scenes * (1 + 2 * (1 + len(RENDERERS)) + 2))
+    # Texture, two truths, two cameras of renderers, the turntable, the texture
+    # and renderers at "auto", done.
+    auto = 1 + len(AUTO_RENDERERS) if settings.auto_close else 0
+    total = max(1, n_scenes * (1 + 2 * (1 + len(RENDERERS)) + 2 + auto))
     done = 0
 
     def step(stage: str) -> None:

@@ -11,7 +11,7 @@ import math
 from pathlib import Path
 
 from aniso3d.bench.analyse import finite
-from aniso3d.bench.corpus import CAMERAS, RENDERERS, TARGETS, CorpusResult
+from aniso3d.bench.corpus import AUTO_CAMERA, AUTO_RENDERERS, CAMERAS, RENDERERS, TARGETS, CorpusResult
 from aniso3d.bench.outputs import cell, jsonable
 from aniso3d.files import atomic_write
 
@@ -20,6 +20,7 @@ TARGET_HEADERS = {
     "minified_vs_2x2": "minified >= 2x2",
     "volume_faster": "volume faster than 1 spp",
     "never_worse_1spp": "never worse than 1 spp",
+    "never_worse_1spp_auto": "never worse than 1 spp (auto)",
     "less_flicker": "less flicker than 1 spp",
     "bytes_fifth": "bytes <= mesh / 5",
 }
@@ -27,7 +28,8 @@ TARGET_HEADERS = {
 SCENE_COLUMNS = (
     "scene", "triangles", "vertices", "mesh_ply_bytes", "texture_bytes", "texture_ratio", "points_bytes",
     "points_ratio", "n_voxels", "n_points", "build_s", "close_voxel_px", "minified_scale", "minified_voxel_px",
-    "turntable_size", "seconds",
+    "turntable_size", "auto_resolution", "auto_voxel_px", "auto_texture_bytes", "auto_points_bytes", "auto_build_s",
+    "seconds",
 )  # fmt: skip
 STILL_VALUES = ("psnr", "ssim", "flip", "coverage", "frame_s", "frame_min_s", "frame_max_s", "frames")
 SPIN_VALUES = ("flicker", "flicker_error", "psnr")
@@ -45,13 +47,14 @@ def scene_table(result: CorpusResult) -> tuple[list[str], list[dict]]:
     ``turntable_<renderer>_<value>``, then ``target_<name>``."""
     cols = list(SCENE_COLUMNS)
     cols += [f"{c}_{r}_{v}" for c in CAMERAS for r in RENDERERS for v in STILL_VALUES]
+    cols += [f"{AUTO_CAMERA}_{r}_{v}" for r in AUTO_RENDERERS for v in STILL_VALUES]
     cols += [f"turntable_{r}_{v}" for r in RENDERERS for v in SPIN_VALUES]
     cols += [f"target_{t}" for t in TARGETS]
     out = []
     for s in result.scenes:
         flat = {k: s.get(k) for k in SCENE_COLUMNS}
-        for c, values in [*((c, STILL_VALUES) for c in CAMERAS), ("turntable", SPIN_VALUES)]:
-            for r in RENDERERS:
+        for c, values in [*((c, STILL_VALUES) for c in (*CAMERAS, AUTO_CAMERA)), ("turntable", SPIN_VALUES)]:
+            for r in AUTO_RENDERERS if c == AUTO_CAMERA else RENDERERS:
                 row = _row(result, s["scene"], c, r) or {}
                 ok = row.get("status") == "ok"
                 flat.update({f"{c}_{r}_{v}": row.get(v) if ok else None for v in values})
@@ -126,6 +129,32 @@ def _renderer_table(result: CorpusResult, camera: str, what: str) -> list[str]:
     return _table(["scene", *RENDERERS], body)
 
 
+def _auto_tables(result: CorpusResult, quality: str) -> list[str]:
+    """The close camera again, the texture renderers at the resolution
+    ``--resolution auto`` picks there, beside the close camera's polygons."""
+    scenes = [s for s in result.scenes if s.get("auto_resolution")]
+    if not scenes:
+        return []
+    lines = [f"## Close up at the resolution `--resolution auto` picks: {quality}", "",
+             "The close camera again; the texture built as finely as that view needs (a voxel about a pixel "
+             "where the object is nearest, a power of two, at most 256^3): what `aniso3d render` and the viewer "
+             "draw by default. Polygons as in the close-up table. Voxel px: a voxel's width in pixels at the "
+             "target; texture: `AnisoTexture.nbytes` of that build.", ""]  # fmt: skip
+    cols = ["mesh-1spp", "mesh-2x2", *AUTO_RENDERERS]
+    body = []
+    for s in scenes:
+        name = s["scene"]
+        cells = [_cell(_row(result, name, "close", r) if r.startswith("mesh") else _row(result, name, AUTO_CAMERA, r),
+                       "quality") for r in cols]  # fmt: skip
+        body.append([name, f"{s['auto_resolution']}^3", _num(s.get("auto_voxel_px"), ".2f"),
+                     _bytes(s.get("auto_texture_bytes")), _num(s.get("auto_build_s"), ".1f"), *cells])  # fmt: skip
+    lines += _table(["scene", "texture", "voxel px", "bytes", "build s", *cols], body)
+    lines += ["Frame time: ms, median [fastest-slowest]", ""]
+    body = [[s["scene"], _cell(_row(result, s["scene"], "close", "mesh-1spp"), "time"),
+             *(_cell(_row(result, s["scene"], AUTO_CAMERA, r), "time") for r in AUTO_RENDERERS)] for s in scenes]
+    return lines + _table(["scene", "mesh-1spp", *AUTO_RENDERERS], body)
+
+
 def _load(meta: dict) -> str:
     load = meta.get("load_average") or {}
     start, end = load.get("start"), load.get("end")
@@ -198,6 +227,7 @@ def corpus_markdown(result: CorpusResult, command: str) -> str:
         "",
     ]
     lines += _renderer_table(result, "turntable", "flicker")
+    lines += _auto_tables(result, quality)
     bad = [r for r in result.rows if r.get("status") != "ok"]
     if bad:
         lines += ["## Not measured", ""]
