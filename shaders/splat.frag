@@ -49,8 +49,10 @@
 // surfaces by depth (aniso3d/rendering/splat/reference.py, the NumPy twin,
 // states the rule):
 //   PASS 1 writes the pushed depth z + push (the visible depth, kept for
-//     compositing with other draws; the least by a MIN blend) and c (summed
-//     by an additive blend: the pixel's coverage sum), and sets the bit of
+//     compositing with other draws; the least by a MIN blend), z +
+//     surface_reach() (the least by a MIN blend: how far beyond its span the
+//     pixel's nearest surface reaches), and c (summed by an additive
+//     blend: the pixel's coverage sum), and sets the bit of
 //     z's slice in the pixel's occupancy mask u_mask (SLICES slices over the
 //     cloud's depths, u_slices) by atomic OR; splat_surfaces.frag then finds
 //     where the pixel's surfaces start (u_surfaces);
@@ -135,7 +137,7 @@ out vec4 f_color;
 #elif PASS == 0
 out uint f_id;
 #elif PASS == 1 && defined(AA)
-out vec4 f_visible;  // (pushed depth, 0, 0, c): blended MIN in RGB, added in alpha
+out vec4 f_visible;  // (pushed depth, surface reach, 0, c): blended MIN in RGB, added in alpha
 #elif PASS == 2 && defined(AA)
 layout(location = 0) out vec4 f_layer[LAYERS];  // (RGB c, c) of each layer
 #elif PASS == 2
@@ -180,6 +182,23 @@ float slice_of(float z) {
 }
 #endif
 #if defined(AA) && PASS == 1
+#ifndef SURFACE_REACH  // aniso3d/rendering/splat/params.py (AA_SURFACE_REACH)
+#define SURFACE_REACH 1.0
+#endif
+// How far (linear depth) behind this fragment its surface may reach in this
+// pixel beyond the span: 0, but for a one-sided splat whose back is culled (a
+// closed surface seen from outside, whose splats facing the eye are one
+// surface within a pixel or lie a solid's thickness apart) the change of the
+// fragment's depth across SURFACE_REACH pixels where the ray meets the
+// splat's plane, at most the depth of its bounding sphere (reachz). h, sw,
+// hit as in main().
+float surface_reach(vec3 h, float sw, bool hit) {
+    if (!hit || fs_in.reachz <= 0.0) return 0.0;
+    // d (t - t0) / d pixel, t - t0 = sw / h.z (rows over pixels: splat.vert).
+    vec2 g = -(fs_in.hc.yz + (sw / h.z) * fs_in.hw.yz) / h.z;
+    return min(length(g) * fs_in.lmap.y * SURFACE_REACH, fs_in.reachz);
+}
+
 // Mark the slice holding slice coordinate u in this pixel's mask (a plain
 // load first: most fragments find their bit set, and an atomic costs more).
 void mark(float u) {
@@ -277,7 +296,7 @@ void main() {
     // The pushed depth (below 1, so the later passes see every marked pixel),
     // kept the least by a MIN blend, and c, summed by an additive one (twice
     // for a one-sided splat whose back is culled: the back's share).
-    f_visible = vec4(clamp(z + fs_in.pushz, 0.0, 0.99999), 0.0, 0.0, c * fs_in.sided);
+    f_visible = vec4(clamp(z + fs_in.pushz, 0.0, 0.99999), z + surface_reach(h, sw, hit), 0.0, c * fs_in.sided);
 #elif PASS == 2
     uvec4 surfaces = imageLoad(u_surfaces, ivec2(gl_FragCoord.xy));
     int layer = layer_of(u, surfaces);

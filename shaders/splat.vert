@@ -336,6 +336,7 @@ void main() {
     vs_out.lmap = vec4(u_depth.y / u_range, 1.0 / u_range, u_slices);
     vs_out.pushz = push / u_range;
     vs_out.sided = u_one_sided && in_size < 0.0 ? 2.0 : 1.0;
+    vs_out.reachz = vs_out.sided > 1.5 ? vs_out.zrange.y - vs_out.zrange.x : 0.0;
 #endif
     float size = max(hi.x - lo.x, hi.y - lo.y) + 0.02;
 #ifdef GEOMETRY_PATH

@@ -4,9 +4,12 @@
 // In: u_mask, each pixel's occupancy mask of SLICES depth slices (WORDS 32-bit
 // words, layer k of the array holding slices 32 k .. 32 k + 31), a bit set
 // for each slice holding a fragment's depth (splat.frag, PASS 1 with AA);
-// u_span, the depth a surface may span, in slices (>= 1).
+// u_span, the depth a surface may span, in slices (>= 1); u_visible's green,
+// the least depth plus reach of the pixel's fragments (splat.frag,
+// surface_reach), and u_slices, the slices' (lo, scale).
 // The pixel's surfaces, front to back: the nearest occupied slice starts one,
-// which takes every occupied slice less than u_span beyond its start; the
+// which takes every occupied slice less than u_span beyond its start (the
+// nearest surface: beyond the reach's slice if that lies farther); the
 // next occupied slice starts the next (aniso3d/rendering/splat/reference.py
 // is the NumPy twin).
 // Out: f_surfaces, the first slices of surfaces 1 .. LAYERS - 1, 16 bits
@@ -28,6 +31,7 @@
 layout(r32ui) uniform uimage2DArray u_mask;
 uniform sampler2D u_visible;  // (pushed depth, 0, 0, coverage sum) of the visibility pass
 uniform float u_span;
+uniform vec2 u_slices;  // (lo, scale): slice coordinate (z - lo) scale of a linear depth z
 
 layout(location = 0) out uvec4 f_surfaces;
 layout(location = 1) out vec2 f_cover;
@@ -55,6 +59,7 @@ void main() {
                 last = s;
                 count += 1u;
                 limit = float(s) + u_span;
+                if (count == 1u) limit = max(float(s), floor((visible.g - u_slices.x) * u_slices.y)) + u_span;
                 skip = limit - float(32 * k);
                 if (skip > 31.0) break;
                 w &= ~((1u << uint(ceil(skip))) - 1u);

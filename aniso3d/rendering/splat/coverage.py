@@ -158,11 +158,12 @@ class HighPass:
         (``cleared``: see :meth:`composite`)."""
         pipe = self.pipe
         ctx = pipe.gl.ctx
-        # Visibility: the pushed nearest depth (a MIN blend), the coverage sum
-        # (an additive one; blending costs llvmpipe far less than an image
-        # atomic per fragment) and the occupancy mask.
+        # Visibility: the pushed nearest depth and the least depth the
+        # fragments' surfaces reach (MIN blends), the coverage sum (an
+        # additive one; blending costs llvmpipe far less than an image atomic
+        # per fragment) and the occupancy mask.
         tg.nearest_fbo.use()
-        tg.nearest_fbo.clear(1.0, 0.0, 0.0, 0.0)
+        tg.nearest_fbo.clear(1.0, 1.0, 0.0, 0.0)
         ctx.disable(moderngl.DEPTH_TEST)
         ctx.enable(moderngl.BLEND)
         ctx.blend_equation = (moderngl.MIN, moderngl.FUNC_ADD)
@@ -177,7 +178,8 @@ class HighPass:
             tg.surfaces_fbo.use()
             tg.nearest.use(location=0)
             prog, vao = pipe.screen("splat_surfaces.frag", aa=True)
-            pipe.bind(prog, {"u_mask": MASK_UNIT, "u_span": uniforms["u_span"], "u_visible": 0})
+            pipe.bind(prog, {"u_mask": MASK_UNIT, "u_span": uniforms["u_span"], "u_slices": uniforms["u_slices"],
+                             "u_visible": 0})  # fmt: skip
             vao.render(moderngl.TRIANGLES, vertices=3)
         except Exception:
             tg.mask.write(np.zeros(tg.mask.width * tg.mask.height * tg.mask.layers, "u4"))  # no stale bits

@@ -70,6 +70,21 @@ AA_CLOSE = (0.9, 3.0)
 #: so they stay one surface (the bounding sphere alone split a plane tilted
 #: 60 degrees into several, letting a quarter of the background through).
 AA_PLANE_REACH = 2.0
+#: How far the nearest surface of a pixel in quality "high" reaches beyond its
+#: span where the pixel holds a closed surface seen from outside (one-sided
+#: splats, their backs culled): each such fragment's depth changes across
+#: this many pixels (where the pixel's ray meets its splat's plane; at most
+#: its bounding sphere's depth), and the nearest surface spans from the
+#: least of its pixel's fragments' depths plus those changes, if that lies
+#: beyond its first slice. A closed surface nearly along the view ray (its
+#: rim) changes depth fast across a pixel, and its splats' planes, each
+#: extended to the ray, meet it at scattered depths: with the span alone its
+#: fragments split into several surfaces that composed as independent
+#: layers, and the background showed through the rim of a minified blob as
+#: a speckle. Closed surfaces facing the eye can only lie a solid's thickness
+#: apart; two-sided splats (leaves, open sheets) keep the span alone. 0: the
+#: span alone everywhere.
+AA_SURFACE_REACH = 1.0
 #: A splat whose true projected area is below AA_REGIME[0]^2 pixels is drawn as
 #: a filtered box of its true area; above AA_REGIME[1]^2, as its exact shape
 #: with the size factor (which closes the gaps between resolved splats); a

@@ -121,7 +121,7 @@ class SplatPipeline:
         if aa:
             defines.update(
                 AA=1, LAYERS=AA_LAYERS, SLICES=AA_SLICES, FILTER=AA_FILTER, PLANE_REACH=float(AA_PLANE_REACH),
-                LAST_WEIGHTS=int(params.AA_LAST_WEIGHTS),
+                LAST_WEIGHTS=int(params.AA_LAST_WEIGHTS), SURFACE_REACH=float(params.AA_SURFACE_REACH),
             )
         if sprite:
             return self.gl.program("splat.vert", "splat.frag", defines=defines)

@@ -15,7 +15,14 @@ fraction of the pixel a splat covers; linear depth z; colour):
 3. Surfaces, front to back: the nearest occupied slice starts one, which
    takes every occupied slice less than ``span`` slices beyond its start
    (one surface's splats lie within a depth of a few splat sizes); the next
-   occupied slice beyond starts the next surface.
+   occupied slice beyond starts the next surface. The nearest surface
+   spans from the farther of its first slice and the slice of the least
+   *reach* of the pixel's fragments: a fragment's depth, plus, for a
+   one-sided splat drawn with its back culled, the change of its depth
+   across :data:`~aniso3d.rendering.splat.params.AA_SURFACE_REACH` pixels
+   where the pixel's ray meets its plane (at most its bounding sphere's
+   depth), so that a closed surface nearly along the ray, whose fragments
+   lie at scattered depths, stays one.
 4. Layer k holds surface k, for k < :data:`~aniso3d.rendering.splat.params.AA_LAYERS` - 1;
    the last layer every surface from there on.
 5. Within a surface splats tile it, so coverages add: a = min(1, sum c); the
@@ -85,6 +92,9 @@ class Fragments:
         counts: (F,) float64, how many times the fragment's coverage counts
             in its pixel's coverage sum: 2 for a one-sided splat drawn with
             its back culled (the back's share), else 1; None: all 1.
+        reach: (F,) float64, the linear depth from which the fragment's
+            surface may span its span in its pixel (rule step 3): its depth
+            plus its reach; None: the depth.
     """
 
     pixel: np.ndarray
@@ -94,6 +104,7 @@ class Fragments:
     size: tuple[int, int]
     slicing: tuple[float, float, float]
     counts: np.ndarray | None = None
+    reach: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = len(self.pixel)
@@ -196,6 +207,15 @@ def subpixel_fragments_np(cloud: PointCloud, view: FrameView, opts: SplatOptions
     zlo = np.clip((depth[splat] - near - rad) / (far - near), 0.0, 1.0)
     zhi = np.clip((depth[splat] - near + rad) / (far - near), 0.0, 1.0)
     z = np.clip(lin, zlo, zhi)
+    # The surface's reach: the span, plus for a one-sided splat whose back is
+    # culled the change of the plane's depth across AA_SURFACE_REACH pixels
+    # where the ray meets it, at most its bounding sphere's depth. (NDC
+    # changes by 2 / w a pixel; d changes by R / proj_x per NDC unit.)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        gx = npn * (n[splat] @ r) / proj[0] * (2.0 / w) / nd**2
+        gy = npn * (n[splat] @ u) / proj[1] * (2.0 / h) / nd**2
+    slope = np.where(hit & (counts[splat] > 1), np.hypot(gx, gy) / (far - near), 0.0)
+    extra = np.minimum(slope * params.AA_SURFACE_REACH, zhi - zlo)
     view_dir = -p / np.linalg.norm(p, axis=1, keepdims=True)
     rgb = np.clip(shade_np(n, view_dir, cloud.kd, cloud.ks, cloud.shininess, view.lighting, cloud.coherence), 0.0, 1.0)
     # The slices span the view depths the cloud's splats may reach
@@ -207,13 +227,17 @@ def subpixel_fragments_np(cloud: PointCloud, view: FrameView, opts: SplatOptions
     slicing = mask_slicing(view, float(corner_depth.min()), float(corner_depth.max()), float(np.median(full_size)),
                            opts)  # fmt: skip
     pixel = (h - 1 - iy) * w + ix
-    return Fragments(pixel, cov, z, rgb[splat], (w, h), slicing, counts[splat])
+    reach = z + extra
+    return Fragments(pixel, cov, z, rgb[splat], (w, h), slicing, counts[splat], reach)
 
 
-def surfaces_np(pixel: np.ndarray, slice_index: np.ndarray, n_pixels: int, span: float):
+def surfaces_np(pixel: np.ndarray, slice_index: np.ndarray, n_pixels: int, span: float,
+                first_end: np.ndarray | None = None):  # fmt: skip
     """The surfaces of each pixel (rule steps 2 and 3): (starts, count), with
     ``starts`` (n_pixels, S) float64 the first slice of each surface front to
-    back (inf past the last) and ``count`` (n_pixels,) how many there are."""
+    back (inf past the last) and ``count`` (n_pixels,) how many there are.
+    ``first_end`` (n_pixels,): the nearest surface takes every slice below
+    this when it lies farther than its first slice plus ``span``."""
     occupied = np.zeros((n_pixels, AA_SLICES), bool)
     occupied[pixel, slice_index] = True
     column = np.arange(AA_SLICES)
@@ -225,8 +249,10 @@ def surfaces_np(pixel: np.ndarray, slice_index: np.ndarray, n_pixels: int, span:
         if not found.any():
             break
         first = np.where(found, np.argmax(later, axis=1), np.inf)
-        starts.append(first)
         limit = np.where(found, first + span, np.inf)
+        if not starts and first_end is not None:
+            limit = np.where(found, np.maximum(limit, first_end), limit)
+        starts.append(first)
     starts_arr = np.stack(starts, axis=1) if starts else np.full((n_pixels, 1), np.inf)
     return starts_arr, np.isfinite(starts_arr).sum(axis=1)
 
@@ -273,7 +299,13 @@ def composite_np(
     counted = c if frags.counts is None else c * np.asarray(frags.counts, dtype=np.float64)[keep]
     cover_sum = np.bincount(pixel, counted, w * h)
     s = np.clip(np.floor((frags.depth[keep] - lo) * scale), 0, AA_SLICES - 1).astype(np.int64)
-    starts, count = surfaces_np(pixel, s, w * h, span)
+    first_end = None
+    if frags.reach is not None:
+        least = np.full(w * h, np.inf)
+        np.minimum.at(least, pixel, np.asarray(frags.reach, np.float64)[keep])
+        with np.errstate(invalid="ignore"):
+            first_end = np.floor((least - lo) * scale) + span
+    starts, count = surfaces_np(pixel, s, w * h, span, first_end)
     surface = (starts[pixel] <= s[:, None]).sum(axis=1) - 1
     layer = np.minimum(surface, layers - 1)
     total = np.zeros((w * h, layers))
