@@ -50,6 +50,7 @@ from aniso3d.errors import InputError
 from aniso3d.rendering.camera import Camera, turntable
 from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.renderer import Renderer
+from aniso3d.rendering.splat.clips import texture_points
 
 #: The renderers measured, in table order.
 RENDERERS = ("mesh-1spp", "mesh-2x2", "mesh-4x4", "volume", "splat-fast", "splat-high")
@@ -359,7 +360,7 @@ class _Scene:
         tex = build_texture(mesh, s.resolution, s.directions, bounds=mesh.bounds)
         build_s = time.perf_counter() - t0
         t0 = time.perf_counter()
-        points = tex.to_points(BASELINE["placement"], BASELINE["per_entry"], BASELINE["point_normal"])
+        points = texture_points(tex, BASELINE["placement"], BASELINE["per_entry"], BASELINE["point_normal"])
         points_s = time.perf_counter() - t0
         self.step(f"{self.name}: texture")
         things = {"mesh": mesh, "volume": tex, "splat": points}
