@@ -205,7 +205,7 @@ def test_quick_run_on_two_tiny_scenes(gl_available, tmp_path):
     for s, (_, mesh) in zip(result.scenes, _tiny(), strict=True):
         assert s["mesh_ply_bytes"] == corpus.ply_bytes(mesh)
         assert s["texture_ratio"] == pytest.approx(s["texture_bytes"] / s["mesh_ply_bytes"])
-        assert s["points_bytes"] == 48 * s["n_points"] > 0
+        assert s["points_bytes"] == 72 * s["n_points"] > 0
         assert s["minified_voxel_px"] == pytest.approx(1.0) and s["minified_scale"] > 1.5
         assert set(s["targets"]) == set(corpus.TARGETS)
         assert all(isinstance(v, bool) for v in s["targets"].values()), s["targets"]

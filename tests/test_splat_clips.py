@@ -171,9 +171,9 @@ def test_a_cut_subpixel_splat_keeps_its_area_inside_a_surface():
     clips[:, 0, 0] = 1.0
     clips[:, 0, 3] = pos[:, 0] + offset
     for i in range(n):
-        one = lambda c: PointCloud(pos[i : i + 1], [[0.0, 0.0, 1.0]], [(0.8 * px) ** 2], [GREY], [0.0], [8.0],  # noqa: E731
-                                   clips=c)  # fmt: skip
-        cut = subpixel_fragments_np(one(clips[i : i + 1]), view, SplatOptions(quality="high"))
+        one = PointCloud(pos[i : i + 1], [[0.0, 0.0, 1.0]], [(0.8 * px) ** 2], [GREY], [0.0], [8.0],
+                         clips=clips[i : i + 1])  # fmt: skip
+        cut = subpixel_fragments_np(one, view, SplatOptions(quality="high"))
         # 0.64 px^2, less fragments below MIN_COVERAGE (1e-4), dropped.
         assert abs(cut.coverage.sum() - 0.64) < 4e-4, (i, cut.coverage.sum())
         # Pixels whose left edge lies past the plane get nothing.

@@ -200,7 +200,8 @@ def subpixel_fragments_np(cloud: PointCloud, view: FrameView, opts: SplatOptions
     keep = np.ones(len(cloud), bool)
     if culling:
         # One-sided points seen from behind are culled (splat.vert).
-        keep &= ~(cloud.one_sided & (np.einsum("ij,ij->i", cloud.normals.astype(np.float64), cloud.positions - eye) > 0))
+        facing = np.einsum("ij,ij->i", cloud.normals.astype(np.float64), cloud.positions - eye)
+        keep &= ~(cloud.one_sided & (facing > 0))
         counts = np.where(cloud.one_sided, 2.0, 1.0)
     if cloud.clips is not None:
         keep &= ~clip_geometry_np(cloud.positions, cloud.normals, cloud.clips, eye)[3]
