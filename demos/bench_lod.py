@@ -96,6 +96,7 @@ def gather_upload(ctx, pyr, cam, size, near, far, state: dict) -> tuple[float, i
     data[:, 7:10] = pc.kd
     data[:, 10] = pc.ks
     data[:, 11] = pc.shininess
+    data[:, 12:] = 0.0  # no clip planes
     rows = max(-(-n // ATTRIB_PER_ROW), 1)
     attrib = np.zeros((rows * ATTRIB_PER_ROW, 8), np.float32)
     attrib[:n, 0:3] = data[:, 3:6]

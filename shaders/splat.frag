@@ -148,10 +148,27 @@ out vec4 f_color;
 // The fraction of this pixel the splat covers (see the top); h as in main(),
 // hit: the pixel's ray meets the splat's plane in front, within near..far.
 float coverage(vec3 h, bool hit) {
+    bool cut = fs_in.cut0.yz != vec2(0.0) || fs_in.cut1.yz != vec2(0.0);
     float small = 0.0;
     if (fs_in.regime < 1.0) {
         vec2 d = gl_FragCoord.xy - fs_in.cpx;
         small = fs_in.box.z * filtered_interval(d.x, fs_in.box.x) * filtered_interval(d.y, fs_in.box.y);
+        if (cut && small > 0.0) {
+#if FILTER == 0
+            // The box times the pixel is a rectangle: its area on the kept
+            // side of each line, exactly (of both, the product of the shares).
+            vec2 p = gl_FragCoord.xy - fs_in.org;
+            vec2 c = fs_in.cpx - fs_in.org;
+            vec2 lo = max(c - fs_in.box.xy, p - 0.5);
+            vec2 hi = min(c + fs_in.box.xy, p + 0.5);
+            float rect = max(hi.x - lo.x, 0.0) * max(hi.y - lo.y, 0.0);
+            small *= rect > 0.0 ? rect_kept(lo, hi, fs_in.cut0) / rect * (rect_kept(lo, hi, fs_in.cut1) / rect) : 0.0;
+#else
+            vec3 p1 = vec3(1.0, gl_FragCoord.xy - fs_in.org);
+            small *= filter_cdf(dot(fs_in.cut0, p1) / max(length(fs_in.cut0.yz), 1e-30))
+                   * filter_cdf(dot(fs_in.cut1, p1) / max(length(fs_in.cut1.yz), 1e-30));
+#endif
+        }
     }
     float large = 0.0;
     if (fs_in.regime > 0.0 && hit) {
@@ -172,6 +189,12 @@ float coverage(vec3 h, bool hit) {
         large = (filter_cdf((1.0 - uv.x) / a) - filter_cdf((-1.0 - uv.x) / a))
               * (filter_cdf((1.0 - uv.y) / b) - filter_cdf((-1.0 - uv.y) / b));
 #endif
+        if (cut) {
+            // Each clip line filtered across its distance in pixels.
+            vec3 p1 = vec3(1.0, gl_FragCoord.xy - fs_in.org);
+            large *= filter_cdf(dot(fs_in.cut0, p1) / max(length(fs_in.cut0.yz), 1e-30))
+                   * filter_cdf(dot(fs_in.cut1, p1) / max(length(fs_in.cut1.yz), 1e-30));
+        }
     }
     return mix(small, large, fs_in.regime);
 }

@@ -117,6 +117,16 @@ in float in_size;
 in vec3 in_kd;
 #endif
 in vec2 in_spec;
+#ifdef INSTANCED
+const vec3 in_clip0 = vec3(0.0);  // an instance's points are not cut
+const vec3 in_clip1 = vec3(0.0);
+#else
+// Two clip planes, each (code, o, phi): the half-space s x_a <= o, code
+// s (a + 1) (0: none), phi the angle of the surface meeting the splat's there
+// (0: none; aniso3d.build.points.PointCloud.clips).
+in vec3 in_clip0;
+in vec3 in_clip1;
+#endif
 
 out SplatData SPLAT_DATA vs_out;
 
@@ -148,6 +158,43 @@ vec3 bilinear(vec3 a, vec3 b, vec3 c, vec3 d) {
     return r;
 }
 
+#ifdef AA
+// Whether the surface meeting the splat's at clip plane c (in_clip0, 1) hides
+// the splat from the eye: in the plane across their edge (the splat's
+// direction u from the edge into its voxel, its normal n), the eye's ray to
+// the splat near the edge crosses the other half-plane, at phi from u, when
+// phi lies between 0 and the eye's angle (a box's face seen behind its
+// neighbour at a silhouette, the floor behind the room's front wall).
+bool hidden_at(vec3 c, vec3 n, vec3 eye) {
+    if (c.x == 0.0 || c.z == 0.0) return false;
+    int a = int(abs(c.x) + 0.5) - 1;
+    float s = c.x > 0.0 ? 1.0 : -1.0;
+    vec3 m = vec3(0.0);
+    m[a] = s;
+    vec3 mp = m - dot(m, n) * n;
+    float l = length(mp);
+    if (l < 1e-6) return false;
+    vec3 u = -mp / l;
+    vec3 q = in_position - ((c.y - s * in_position[a]) / l) * u;  // the edge's point nearest the centre
+    vec3 e = eye - q;
+    float th = atan(dot(e, n), dot(e, u));
+    return c.z * th > 0.0 && abs(c.z) < abs(th);
+}
+
+// A clip plane (code, o) (in_clip0, 1) as a line in the image: the row over
+// (1, p - org) of (o - s x_a) w' at the point x where the pixel's ray meets the
+// splat's plane, x = centre + u h.x t + v h.y b: positive on the kept side
+// (w' > 0 in front); (1, 0, 0) for none. The rows hu, hv, hw must already be
+// over pixel offsets.
+vec3 cut_line(vec2 c, vec3 t, vec3 b, vec2 h) {
+    if (c.x == 0.0) return vec3(1.0, 0.0, 0.0);
+    int a = int(abs(c.x) + 0.5) - 1;
+    float s = c.x > 0.0 ? 1.0 : -1.0;
+    float k0 = c.y - s * in_position[a];
+    return k0 * vs_out.hw - (h.x * s * t[a]) * vs_out.hu - (h.y * s * b[a]) * vs_out.hv;
+}
+#endif
+
 void main() {
 #ifdef INSTANCED
     instance_inputs();
@@ -160,6 +207,13 @@ void main() {
     vec3 tu = t / max(h.x, 1e-30);
     vec3 tv = b / max(h.y, 1e-30);
 
+#ifdef AA
+    // A splat hidden behind the surface meeting it at a clip plane is not drawn.
+    if (hidden_at(in_clip0, n, u_q0 - u_t0 * u_ray[0]) || hidden_at(in_clip1, n, u_q0 - u_t0 * u_ray[0])) {
+        cull();
+        return;
+    }
+#endif
     vec3 g = u_q0 - in_position;
     vec3 rt = u_t0 * u_ray[1];
     vec3 ut = u_t0 * u_ray[2];
@@ -337,6 +391,19 @@ void main() {
     vs_out.pushz = push / u_range;
     vs_out.sided = u_one_sided && in_size < 0.0 ? 2.0 : 1.0;
     vs_out.reachz = vs_out.sided > 1.5 ? vs_out.zrange.y - vs_out.zrange.x : 0.0;
+    // The clip planes' lines; a sub-pixel box cut by them keeps its true
+    // area (all of it lies on their kept side): its amplitude grows by the
+    // share cut off (at most 4: the kept sides hold its centre).
+    vs_out.cut0 = cut_line(in_clip0.xy, t, b, h);
+    vs_out.cut1 = cut_line(in_clip1.xy, t, b, h);
+    if ((in_clip0.x != 0.0 || in_clip1.x != 0.0) && vs_out.box.z > 0.0) {
+        vec2 c = vs_out.cpx - org;
+        vec2 blo = c - vs_out.box.xy;
+        vec2 bhi = c + vs_out.box.xy;
+        float full = 4.0 * vs_out.box.x * vs_out.box.y;
+        float kept = rect_kept(blo, bhi, vs_out.cut0) / full * (rect_kept(blo, bhi, vs_out.cut1) / full);
+        vs_out.box.z /= max(kept, 0.25);
+    }
 #endif
     float size = max(hi.x - lo.x, hi.y - lo.y) + 0.02;
 #ifdef GEOMETRY_PATH

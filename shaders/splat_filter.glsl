@@ -36,3 +36,37 @@ float filter_cdf(float x) {
 float filtered_interval(float t, float b) {
     return filter_cdf(t + b) - filter_cdf(t - b);
 }
+
+// A clip plane's line in the image (a row over (1, x, y)): c (L . (1, x, y))
+// is positive where the splat is kept. The area of the rectangle [lo, hi]
+// on the kept side, exactly: the kept height along the axis the line is
+// flatter to is a clamped linear function z of the other coordinate,
+// integrated in closed form (P, the integral of clamp(z, 0, H)).
+float clamp_integral(float z, float h) {
+    float a = max(z, 0.0);
+    float b = max(z - h, 0.0);
+    return 0.5 * (a * a - b * b);
+}
+float rect_kept(vec2 lo, vec2 hi, vec3 l) {
+    vec2 size = max(hi - lo, 0.0);
+    float full = size.x * size.y;
+    if (full <= 0.0) return 0.0;
+    vec2 g = l.yz;
+    if (abs(g.x) > abs(g.y)) {
+        lo = lo.yx;
+        hi = hi.yx;
+        g = g.yx;
+        size = size.yx;
+    }
+    if (g.y == 0.0) return l.x >= 0.0 ? full : 0.0;
+    // The line y = c + m x; kept above it where g.y > 0, below where g.y < 0.
+    float m = -g.x / g.y;
+    float c = -l.x / g.y;
+    float y0 = c + m * lo.x;
+    float y1 = c + m * hi.x;
+    float z0 = g.y > 0.0 ? hi.y - y0 : y0 - lo.y;
+    float z1 = g.y > 0.0 ? hi.y - y1 : y1 - lo.y;
+    float dz = z1 - z0;
+    if (abs(dz) < 1e-3 * size.x) return size.x * clamp(0.5 * (z0 + z1), 0.0, size.y);
+    return size.x * (clamp_integral(z1, size.y) - clamp_integral(z0, size.y)) / dz;
+}

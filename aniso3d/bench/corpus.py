@@ -57,6 +57,7 @@ from aniso3d.rendering.camera import Camera, turntable
 from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.renderer import Renderer
 from aniso3d.rendering.select import needed_resolution
+from aniso3d.rendering.splat.clips import texture_points
 
 #: The renderers measured, in table order.
 RENDERERS = ("mesh-1spp", "mesh-2x2", "mesh-4x4", "volume", "splat-fast", "splat-high")
@@ -380,7 +381,7 @@ class _Scene:
         tex = build_texture(mesh, s.resolution, s.directions, bounds=mesh.bounds)
         build_s = time.perf_counter() - t0
         t0 = time.perf_counter()
-        points = tex.to_points(BASELINE["placement"], BASELINE["per_entry"], BASELINE["point_normal"])
+        points = texture_points(tex, BASELINE["placement"], BASELINE["per_entry"], BASELINE["point_normal"])
         points_s = time.perf_counter() - t0
         self.step(f"{self.name}: texture")
         things = {"mesh": mesh, "volume": tex, "splat": points}
@@ -430,7 +431,7 @@ class _Scene:
         t0 = time.perf_counter()
         tex = build_texture(self.mesh, res, s.directions, bounds=self.mesh.bounds)
         build_s = time.perf_counter() - t0
-        points = tex.to_points(BASELINE["placement"], BASELINE["per_entry"], BASELINE["point_normal"])
+        points = texture_points(tex, BASELINE["placement"], BASELINE["per_entry"], BASELINE["point_normal"])
         self.step(f"{self.name}: texture {res}^3")
         spec = replace(close, label=AUTO_CAMERA, voxel_px=close.voxel_px * s.resolution / res)
         self.still(renderer, spec, {"volume": tex, "splat": points}, truth=truth, resolution=res)

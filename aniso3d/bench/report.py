@@ -277,7 +277,7 @@ def section_data_size(v: _View) -> list[str]:
             f"At {base_res}^3 the texture is {ratio_t:.2f}x the mesh ({'smaller' if ratio_t < 1 else 'larger'}); "
             f"the points are {_fmt(ratio_p, '.2f')}x the mesh. Texture bytes count every stored array as "
             "held in memory (float64 density and area, the float64 centroid and float32 mean normal per "
-            "entry); point bytes are 12 float32 per point as uploaded. " + verdict,
+            "entry); point bytes are 12 float32 per point as uploaded, 18 with clip planes. " + verdict,
             "",
         ]
     L += _upload_sentences(v.rows, v.near["label"], base_res)

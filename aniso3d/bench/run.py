@@ -39,6 +39,7 @@ from aniso3d.build.texture import build_texture
 from aniso3d.errors import InputError
 from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.renderer import Renderer, downsample
+from aniso3d.rendering.splat.clips import texture_points
 
 #: Row columns, in CSV order; rows may carry more keys, written after these.
 # fmt: off
@@ -411,7 +412,7 @@ class _Sweep:
                     if case.points_key is not None:
                         if case.points_key not in points:
                             t0 = time.perf_counter()
-                            pts = tex.to_points(case.placement, case.per_entry, case.point_normal)
+                            pts = texture_points(tex, case.placement, case.per_entry, case.point_normal)
                             points[case.points_key] = (pts, time.perf_counter() - t0)
                         thing, row["points_s"] = points[case.points_key]
                         row["n_points"], row["points_bytes"] = len(thing), thing.nbytes

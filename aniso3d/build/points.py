@@ -51,6 +51,17 @@ class PointCloud:
             seen: the renderers drop it where it faces away from the eye
             (at a silhouette it would cover the pixels the front covers
             again). None: every point two-sided, as for a scanned cloud.
+        clips: (N, 2, 5) float64, up to two half-spaces ``m . x <= o`` each
+            point's splat is cut to, rows ``(m, o, phi)`` with ``m`` a
+            coordinate axis or its opposite (world units), ``m = 0`` for
+            none: the faces of its voxel where the surface it stands for
+            ends; ``phi`` (radians), where another surface meets it there,
+            that surface's angle about the edge from the point's own,
+            ``cos(phi) u + sin(phi) n`` (``u`` in the splat's plane from the
+            edge towards its centre, ``n`` its normal), 0 where none does.
+            Made by the renderer from the texture
+            (:mod:`aniso3d.rendering.splat.clips`); None: no point is cut,
+            as for a scanned cloud or the points ``to_points`` makes.
     """
 
     positions: np.ndarray
@@ -62,6 +73,7 @@ class PointCloud:
     name: str = "points"
     coherence: np.ndarray | None = None
     one_sided: np.ndarray | None = None
+    clips: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         p = np.ascontiguousarray(self.positions, dtype=np.float64)
@@ -102,6 +114,17 @@ class PointCloud:
             if one.shape != (n,) or one.dtype != bool:
                 raise InputError(f"point one_sided must be a ({n},) bool array, got {one.dtype} {one.shape}")
             object.__setattr__(self, "one_sided", None if not one.any() else one.copy())
+        if self.clips is not None:
+            cl = np.asarray(self.clips, dtype=np.float64)
+            if cl.shape != (n, 2, 5):
+                raise InputError(f"point clips must have shape ({n}, 2, 5), got {cl.shape}")
+            if n and not np.isfinite(cl).all():
+                raise InputError("point clips hold NaN or Inf values")
+            m = np.abs(cl[..., :3])
+            axis_like = ((m == 0.0).sum(-1) >= 2) & np.isin(m.sum(-1), (0.0, 1.0))
+            if n and not axis_like.all():
+                raise InputError("point clip normals must be a coordinate axis, its opposite, or 0 (no clip)")
+            object.__setattr__(self, "clips", None if not m.any() else cl)
         object.__setattr__(self, "positions", p)
         object.__setattr__(self, "normals", nrm.astype(np.float32))
         object.__setattr__(self, "areas", areas)
@@ -123,9 +146,10 @@ class PointCloud:
     @property
     def nbytes(self) -> int:
         """Bytes as uploaded for rendering: float32 position, normal, radius,
-        RGB, ks, n = 12 floats per point (the coherence rides as the
-        uploaded normal's length)."""
-        return int(len(self) * 12 * 4)
+        RGB, ks, n = 12 floats per point (the coherence rides as the uploaded
+        normal's length), and 6 more where the cloud has clip planes (two,
+        each an axis code, an offset and an angle)."""
+        return int(len(self) * (12 if self.clips is None else 18) * 4)
 
     def total_area(self) -> float:
         return float(self.areas.sum())

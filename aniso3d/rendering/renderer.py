@@ -77,6 +77,7 @@ from aniso3d.rendering.context import BACKENDS, GLContext
 from aniso3d.rendering.frame import Frame, FrameView, view_depth
 from aniso3d.rendering.lighting import Lighting
 from aniso3d.rendering.select import needed_resolution
+from aniso3d.rendering.splat.clips import clipped
 
 METHODS = ("mesh", "volume", "splat")
 #: ``BuildOptions.resolution`` that asks for :func:`~aniso3d.rendering.select.needed_resolution`.
@@ -256,10 +257,14 @@ class Renderer:
         if method == "volume":
             return tex
         opts = (build.placement, build.per_entry, build.point_normal)
+        # Each point with the faces of its voxel where its surface ends
+        # (aniso3d.rendering.splat.clips; quality "high" cuts its splat there).
         if build.per_entry == "adaptive":  # counts per entry (lod.py)
-            make = lambda: self.pyramid(tex).level_cloud(0, *opts)[0]  # noqa: E731
+            def make():
+                pyr = self.pyramid(tex)
+                return clipped(pyr.level_cloud(0, *opts)[0], tex, None, pyr.adaptive_counts(0))
         else:
-            make = lambda: tex.to_points(*opts)  # noqa: E731
+            make = lambda: clipped(tex.to_points(*opts), tex, None, build.per_entry)  # noqa: E731
         return self.conversions.get_or_make(tex, ("points", *opts), make)
 
     def pyramid(self, thing, **build) -> Pyramid:

@@ -34,12 +34,21 @@ ATTRIB_PER_ROW = 2048
 ATTRIBUTES = (("in_position", 3), ("in_normal", 3), ("in_size", 1), ("in_kd", 3), ("in_spec", 2))
 #: float32 values per point in the vertex buffer.
 FLOATS_PER_POINT = sum(k for _, k in ATTRIBUTES)
+#: The clip planes' attributes, in a buffer of their own made only for a cloud
+#: that has them (:attr:`~aniso3d.build.points.PointCloud.clips`; without it
+#: the shader reads OpenGL's default (0, 0, 0): none): ``in_clip0`` and
+#: ``in_clip1`` in the local frame, each (code, o, phi), the half-space
+#: ``s x_a <= o`` with code ``s (a + 1)`` (0: none).
+CLIP_ATTRIBUTES = (("in_clip0", 3), ("in_clip1", 3))
+#: float32 values per point in the clip planes' buffer.
+CLIP_FLOATS_PER_POINT = sum(k for _, k in CLIP_ATTRIBUTES)
 
 
 
 @dataclass(eq=False)
 class GPUPoints:
-    """A point cloud uploaded once: 12 float32 per point, positions relative to
+    """A point cloud uploaded once: 12 float32 per point (6 more in ``clip_vbo``
+    for a cloud with clip planes), positions relative to
     ``origin``, Morton-sorted, in blocks of :data:`BLOCK` points; and the
     per-point shading attributes again as a texture (two RGBA32F texels per
     point, :data:`ATTRIB_PER_ROW` points per row) for the deferred shading pass.
@@ -62,6 +71,8 @@ class GPUPoints:
     vaos: dict = field(default_factory=dict)
     #: Median ``sqrt(area)`` of the points (of level 0 for a pyramid).
     typical_size: float = 0.0
+    #: The clip planes (:data:`CLIP_ATTRIBUTES`), None for a cloud without.
+    clip_vbo: moderngl.Buffer | None = None
 
 
 @dataclass(eq=False)
@@ -112,7 +123,8 @@ def upload_points(gl: GLContext, cloud: PointCloud | LodPoints) -> GPUPoints:
     origin = 0.5 * (bounds[0] + bounds[1])
     order = morton_order(cloud.positions - origin)
     arrays = (cloud.positions, uploaded_normals(cloud), cloud.areas, cloud.kd, cloud.ks, cloud.shininess)
-    return _upload_arrays(gl, GPUPoints, arrays, order, bounds, origin, one_sided=cloud.one_sided)
+    return _upload_arrays(gl, GPUPoints, arrays, order, bounds, origin, one_sided=cloud.one_sided,
+                          clips=cloud.clips)  # fmt: skip
 
 
 #: Least coherence uploaded: the normal's length carries it, and the splat's
@@ -128,11 +140,28 @@ def uploaded_normals(cloud: PointCloud) -> np.ndarray:
     return cloud.normals * np.maximum(cloud.coherence, MIN_COHERENCE)[:, None]
 
 
-def _upload_arrays(gl: GLContext, cls, arrays, order, bounds, origin, one_sided=None, **extra) -> GPUPoints:
+def clip_attributes(clips: np.ndarray, origin) -> np.ndarray:
+    """(N, 2, 3) float32 (code, offset, angle) of clip planes ``clips`` (N, 2, 5)
+    (:attr:`~aniso3d.build.points.PointCloud.clips`) in the frame whose
+    origin is ``origin``: the half-space ``s x_a <= o`` as code ``s (a + 1)``
+    (0: none) and ``o`` less ``s origin_a``; the angle as it is."""
+    m = np.asarray(clips[..., :3], dtype=np.float64)
+    axis = np.argmax(np.abs(m), axis=-1)
+    sign = np.take_along_axis(m, axis[..., None], axis=-1)[..., 0]
+    local = clips[..., 3] - sign * np.asarray(origin, dtype=np.float64)[axis]
+    angle = np.where(sign != 0, clips[..., 4], 0.0)
+    return np.stack([sign * (axis + 1), np.where(sign != 0, local, 0.0), angle], axis=-1).astype(np.float32)
+
+
+def _upload_arrays(
+    gl: GLContext, cls, arrays, order, bounds, origin, one_sided=None, clips=None, **extra
+) -> GPUPoints:
     """Upload the points ``order`` of ``arrays`` (positions, normals,
     areas, kd, ks, shininess), in that order, relative to ``origin``; a
     ``one_sided`` point (:attr:`~aniso3d.build.points.PointCloud.one_sided`)
-    gets its size negated (splat.vert culls it where it faces away)."""
+    gets its size negated (splat.vert culls it where it faces away); ``clips``
+    (:attr:`~aniso3d.build.points.PointCloud.clips`, None: none) are moved to
+    the local frame."""
     positions, normals, areas, kd, ks, shininess = arrays
     n = len(order)
     rows = -(-n // ATTRIB_PER_ROW)
@@ -150,6 +179,9 @@ def _upload_arrays(gl: GLContext, cls, arrays, order, bounds, origin, one_sided=
     data[:, 7:10] = kd[order]
     data[:, 10] = ks[order]
     data[:, 11] = shininess[order]
+    clip_data = None
+    if clips is not None:
+        clip_data = clip_attributes(clips[order], origin).reshape(n, CLIP_FLOATS_PER_POINT)
     attrib = np.zeros((rows * ATTRIB_PER_ROW, 8), dtype=np.float32)
     attrib[:n, 0:3] = data[:, 3:6]
     attrib[:n, 3] = data[:, 10]
@@ -157,6 +189,7 @@ def _upload_arrays(gl: GLContext, cls, arrays, order, bounds, origin, one_sided=
     attrib[:n, 7] = data[:, 11]
     ctx = gl.ctx
     vbo = gl.track(ctx.buffer(data.tobytes()))
+    clip_vbo = None if clip_data is None else gl.track(ctx.buffer(clip_data.tobytes()))
     tex = gl.track(
         ctx.texture((2 * ATTRIB_PER_ROW, rows), 4, attrib.tobytes(), dtype="f4")
     )
@@ -169,7 +202,8 @@ def _upload_arrays(gl: GLContext, cls, arrays, order, bounds, origin, one_sided=
         origin=origin,
         bounds=bounds,
         n_points=n,
-        nbytes=data.nbytes + attrib.nbytes,
+        nbytes=data.nbytes + attrib.nbytes + (0 if clip_data is None else clip_data.nbytes),
+        clip_vbo=clip_vbo,
         block_start=start,
         block_count=count,
         block_lo=np.minimum.reduceat(local, start, axis=0),
@@ -217,9 +251,12 @@ def upload_lod(gl: GLContext, lod: LodPoints) -> GPULodPoints:
     one_sided = None
     if any(c.one_sided is not None for c in clouds):
         one_sided = np.concatenate([np.zeros(len(c), bool) if c.one_sided is None else c.one_sided for c in clouds])
+    clips = None
+    if any(c.clips is not None for c in clouds):
+        clips = np.concatenate([np.zeros((len(c), 2, 5)) if c.clips is None else c.clips for c in clouds])
     empty = np.full((2, 3), np.nan)
     handle = _upload_arrays(
-        gl, GPULodPoints, arrays, np.concatenate(parts), bounds, origin, one_sided=one_sided,
+        gl, GPULodPoints, arrays, np.concatenate(parts), bounds, origin, one_sided=one_sided, clips=clips,
         lod=lod, level_first=np.asarray(level_first, dtype=np.int64),
         rank=rank, run_first=run_first, run_count=run_count,
         level_bounds=np.stack([c.bounds if len(c) else empty for c in clouds]),
@@ -296,7 +333,7 @@ def select(handle: GPULodPoints, view: FrameView, pixel_error: float = 1.0) -> d
 
 def release_points(gl: GLContext, handle: GPUPoints) -> None:
     """Free an upload's GPU objects."""
-    gl.free(*handle.vaos.values(), handle.vbo, handle.attrib)
+    gl.free(*handle.vaos.values(), handle.vbo, handle.attrib, *([handle.clip_vbo] if handle.clip_vbo else []))
     handle.vaos.clear()
     if isinstance(handle, GPULodPoints):
         gl.free(*handle.indexed_vaos.values(), handle.index_buffer)

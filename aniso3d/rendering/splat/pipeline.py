@@ -25,7 +25,7 @@ from aniso3d.errors import ResourceError
 from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.frame import FrameView
 from aniso3d.rendering.splat import params
-from aniso3d.rendering.splat.buffers import ATTRIBUTES, GPULodPoints, GPUPoints
+from aniso3d.rendering.splat.buffers import ATTRIBUTES, CLIP_ATTRIBUTES, GPULodPoints, GPUPoints
 from aniso3d.rendering.splat.culling import depth_range, large_blocks
 from aniso3d.rendering.splat.geometry import mask_slicing
 from aniso3d.rendering.splat.options import SplatOptions
@@ -151,14 +151,18 @@ class SplatPipeline:
         if vao is None:
             if "in_position" not in prog:
                 raise ResourceError("splat vertex shader has no active in_position attribute")
-            fmt, names = [], []
-            for name, k in ATTRIBUTES:
-                if name in prog:  # attributes a variant does not read are skipped
-                    fmt.append(f"{k}f")
-                    names.append(name)
-                else:
-                    fmt.append(f"{4 * k}x")
-            content = [(handle.vbo, " ".join(fmt), *names)]
+            content = []
+            for buffer, attributes in ((handle.vbo, ATTRIBUTES), (handle.clip_vbo, CLIP_ATTRIBUTES)):
+                if buffer is None or not any(name in prog for name, _ in attributes):
+                    continue  # no clip planes: the shader reads the default (0, 0, 0), none
+                fmt, names = [], []
+                for name, k in attributes:
+                    if name in prog:  # attributes a variant does not read are skipped
+                        fmt.append(f"{k}f")
+                        names.append(name)
+                    else:
+                        fmt.append(f"{4 * k}x")
+                content.append((buffer, " ".join(fmt), *names))
             if indexed:
                 vao = self.gl.ctx.vertex_array(
                     prog, content, index_buffer=handle.index_buffer, index_element_size=4

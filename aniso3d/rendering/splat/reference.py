@@ -119,6 +119,62 @@ def _box_cdf(x: np.ndarray) -> np.ndarray:
     return np.clip(x + 0.5, 0.0, 1.0)
 
 
+def rect_kept_np(lo: np.ndarray, hi: np.ndarray, line: np.ndarray) -> np.ndarray:
+    """Area of the rectangles [lo, hi] ((N, 2) each) where ``line`` (N, 3),
+    ``c + gx x + gy y``, is at least 0: the kept height along the axis the
+    line is flatter to, a clamped linear function of the other coordinate,
+    integrated in closed form (splat_filter.glsl rect_kept())."""
+    lo, hi, line = (np.asarray(a, dtype=np.float64) for a in (lo, hi, line))
+    size = np.maximum(hi - lo, 0.0)
+    full = size[:, 0] * size[:, 1]
+    swap = np.abs(line[:, 1]) > np.abs(line[:, 2])
+    sw = lambda a: np.where(swap[:, None], a[:, ::-1], a)  # noqa: E731
+    lo, hi, size, g = sw(lo), sw(hi), sw(size), sw(line[:, 1:])
+    flat = g[:, 1] == 0.0
+    gy = np.where(flat, 1.0, g[:, 1])
+    m, c = -g[:, 0] / gy, -line[:, 0] / gy
+    y0, y1 = c + m * lo[:, 0], c + m * hi[:, 0]
+    up = g[:, 1] > 0
+    z0 = np.where(up, hi[:, 1] - y0, y0 - lo[:, 1])
+    z1 = np.where(up, hi[:, 1] - y1, y1 - lo[:, 1])
+    dz = z1 - z0
+
+    def integral(z):
+        return 0.5 * (np.maximum(z, 0.0) ** 2 - np.maximum(z - size[:, 1], 0.0) ** 2)
+
+    small = np.abs(dz) < 1e-3 * size[:, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ramp = size[:, 0] * (integral(z1) - integral(z0)) / np.where(small, 1.0, dz)
+    mid = size[:, 0] * np.clip(0.5 * (z0 + z1), 0.0, size[:, 1])
+    kept = np.where(small, mid, ramp)
+    kept = np.where(flat, np.where(line[:, 0] >= 0, full, 0.0), kept)
+    return np.where(full > 0, kept, 0.0)
+
+
+def clip_geometry_np(positions: np.ndarray, normals: np.ndarray, clips: np.ndarray, eye: np.ndarray):
+    """For each point's clip planes (:attr:`~aniso3d.build.points.PointCloud.clips`,
+    (N, 2, 5)): the edge's point nearest the centre ``q`` (N, 2, 3), the
+    edge's direction (N, 2, 3), whether the plane is set (N, 2), and whether
+    the surface meeting the splat there hides it from ``eye`` (N,): the eye's
+    angle about the edge, from the splat's direction into its voxel, lies
+    beyond the meeting surface's (splat.vert hidden_at())."""
+    m, o, phi = clips[..., :3], clips[..., 3], clips[..., 4]
+    n = normals.astype(np.float64)[:, None, :]
+    mp = m - np.einsum("nkc,nkc->nk", m, np.broadcast_to(n, m.shape))[..., None] * n
+    length = np.linalg.norm(mp, axis=-1)
+    has = np.linalg.norm(m, axis=-1) > 0
+    ok = has & (length > 1e-6)
+    u = -mp / np.where(ok, length, 1.0)[..., None]
+    lam = (o - np.einsum("nkc,nc->nk", m, positions)) / np.where(ok, length, 1.0)
+    q = positions[:, None, :] - lam[..., None] * u
+    e = eye[None, None, :] - q
+    th = np.arctan2(np.einsum("nkc,nkc->nk", e, np.broadcast_to(n, e.shape)), np.einsum("nkc,nkc->nk", e, u))
+    hidden = ok & (phi != 0) & (phi * th > 0) & (np.abs(phi) < np.abs(th))
+    along = np.cross(np.broadcast_to(n, m.shape), m)
+    along /= np.maximum(np.linalg.norm(along, axis=-1, keepdims=True), 1e-300)
+    return q, along, ok, hidden.any(axis=1)
+
+
 def subpixel_fragments_np(cloud: PointCloud, view: FrameView, opts: SplatOptions) -> Fragments:
     """The fragments quality "high" draws for ``cloud``, every splat of which
     must be in the sub-pixel regime (true projected area at most
@@ -128,6 +184,13 @@ def subpixel_fragments_np(cloud: PointCloud, view: FrameView, opts: SplatOptions
     box in the image with the second moments of its true projected area (no
     size factor) and an amplitude that keeps that area; its coverage of a pixel
     is the box filtered by the pixel's box and sampled at the pixel centre.
+    A splat with clip planes (:attr:`~aniso3d.build.points.PointCloud.clips`)
+    is dropped where the surface meeting it at one hides it
+    (:func:`clip_geometry_np`); else its box is cut by the planes' lines in
+    the image (each edge's two points projected), its amplitude grown by the
+    share cut off (at most 4), and each fragment keeps the share of its
+    rectangle (box times pixel) on the kept side of each line
+    (:func:`rect_kept_np`; of both, the product of the shares).
     A fragment's depth is where the pixel centre's ray meets the splat's plane
     (else the centre's), clamped to the splat's bounding sphere grown by
     :data:`~aniso3d.rendering.splat.params.AA_PLANE_REACH` pixels; its colour
@@ -145,13 +208,19 @@ def subpixel_fragments_np(cloud: PointCloud, view: FrameView, opts: SplatOptions
     full = cloud  # the slices span the whole cloud's depths, culled points included (as uploaded)
     culling = cloud.one_sided is not None and outside(eye, cloud.bounds)
     counts = np.ones(len(cloud))
+    keep = np.ones(len(cloud), bool)
     if culling:
         # One-sided points seen from behind are culled (splat.vert).
-        behind = cloud.one_sided & (np.einsum("ij,ij->i", cloud.normals.astype(np.float64), cloud.positions - eye) > 0)
-        keep = ~behind
-        counts = np.where(cloud.one_sided, 2.0, 1.0)[keep]
+        facing = np.einsum("ij,ij->i", cloud.normals.astype(np.float64), cloud.positions - eye)
+        keep &= ~(cloud.one_sided & (facing > 0))
+        counts = np.where(cloud.one_sided, 2.0, 1.0)
+    if cloud.clips is not None:
+        keep &= ~clip_geometry_np(cloud.positions, cloud.normals, cloud.clips, eye)[3]
+    if not keep.all():
+        counts = counts[keep]
         cloud = PointCloud(cloud.positions[keep], cloud.normals[keep], cloud.areas[keep], cloud.kd[keep],
-                           cloud.ks[keep], cloud.shininess[keep], coherence=cloud.coherence[keep])  # fmt: skip
+                           cloud.ks[keep], cloud.shininess[keep], coherence=cloud.coherence[keep],
+                           clips=None if cloud.clips is None else cloud.clips[keep])  # fmt: skip
     p = cloud.positions - eye
     n = cloud.normals
     t_ax, b_ax = tangent_frame(n)
@@ -179,6 +248,30 @@ def subpixel_fragments_np(cloud: PointCloud, view: FrameView, opts: SplatOptions
     half[grow] *= np.sqrt(area[grow] / box[grow])[:, None]
     box = np.where(grow, area, box)
     amp = np.divide(area, box, out=np.zeros_like(area), where=box > 0)
+    # The clip planes' lines in the image, in pixels about the centre, each
+    # through its edge's two points projected, positive on the kept side.
+    lines = np.zeros((len(cloud), 2, 3))
+    lines[..., 0] = 1.0
+    if cloud.clips is not None:
+        q, along, has, _ = clip_geometry_np(cloud.positions, cloud.normals, cloud.clips, eye)
+
+        def project(x):  # world (N, 2, 3) -> pixels about the centre
+            e = (x - eye) @ rot.T
+            return (e[..., :2] * proj / -e[..., 2:3] * 0.5 + 0.5) * np.array([w, h]) - cpx[:, None, :]
+
+        scale = np.sqrt(cloud.areas)[:, None, None]
+        a, b = project(q), project(q + along * scale)
+        g = np.stack([a[..., 1] - b[..., 1], b[..., 0] - a[..., 0]], axis=-1)  # normal to the line
+        c0 = -np.einsum("nkc,nkc->nk", g, a)
+        sign = np.where(c0 >= 0, 1.0, -1.0)  # the centre (0, 0) is kept
+        lines = np.where(has[..., None], np.concatenate([c0[..., None], g], axis=-1) * sign[..., None], lines)
+        cut = has.any(axis=1)
+        box_area = 4.0 * half[:, 0] * half[:, 1]
+        kept = np.ones(len(cloud))
+        for k in range(2):
+            kept *= np.divide(rect_kept_np(-half, half, lines[:, k]), box_area, out=np.ones_like(box_area),
+                              where=box_area > 0)  # fmt: skip
+        amp = np.where(cut & (box_area > 0), amp / np.maximum(kept, 0.25), amp)
     # Every pixel the filtered box reaches: a window of offsets around the centre.
     reach = int(math.ceil(float(half.max(initial=0.0)) + 1.0))
     off = np.arange(-reach, reach + 1)
@@ -190,7 +283,18 @@ def subpixel_fragments_np(cloud: PointCloud, view: FrameView, opts: SplatOptions
            * (_box_cdf(dy + half[:, 1:]) - _box_cdf(dy - half[:, 1:])))  # fmt: skip
     keep = (cov >= MIN_COVERAGE) & (ix >= 0) & (ix < w) & (iy >= 0) & (iy < h)
     splat, _ = np.nonzero(keep)
-    ix, iy, cov = ix[keep], iy[keep], cov[keep]
+    ix, iy, cov, dx, dy = ix[keep], iy[keep], cov[keep], dx[keep], dy[keep]
+    if cloud.clips is not None:
+        # Each fragment's rectangle (box times pixel) kept by the lines.
+        d = np.stack([dx, dy], axis=1)
+        lo, hi = np.maximum(-half[splat], d - 0.5), np.minimum(half[splat], d + 0.5)
+        rect = np.prod(np.maximum(hi - lo, 0.0), axis=1)
+        share = np.ones(len(splat))
+        for k in range(2):
+            share *= np.divide(rect_kept_np(lo, hi, lines[splat, k]), rect, out=np.zeros_like(rect), where=rect > 0)
+        cov = cov * share
+        keep = cov >= MIN_COVERAGE
+        splat, ix, iy, cov = splat[keep], ix[keep], iy[keep], cov[keep]
     # Depth: the pixel centre's ray d = f + x R + y U (d . f = 1, so t is the
     # view depth) meets the plane n . (q - p) = 0 at t = n . p / n . d.
     x = (ix + 0.5) / w * 2.0 - 1.0
