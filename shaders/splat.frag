@@ -51,7 +51,9 @@
 //   PASS 1 writes the pushed depth z + push (the visible depth, kept for
 //     compositing with other draws; the least by a MIN blend), z +
 //     surface_reach() (the least by a MIN blend: how far beyond its span the
-//     pixel's nearest surface reaches), and c (summed by an additive
+//     pixel's nearest surface reaches), 0 for a one-sided splat whose back
+//     is culled and 1 otherwise (a MIN blend: whether the pixel holds a
+//     closed surface seen from outside), and c (summed by an additive
 //     blend: the pixel's coverage sum), and sets the bit of
 //     z's slice in the pixel's occupancy mask u_mask (SLICES slices over the
 //     cloud's depths, u_slices) by atomic OR; splat_surfaces.frag then finds
@@ -137,7 +139,7 @@ out vec4 f_color;
 #elif PASS == 0
 out uint f_id;
 #elif PASS == 1 && defined(AA)
-out vec4 f_visible;  // (pushed depth, surface reach, 0, c): blended MIN in RGB, added in alpha
+out vec4 f_visible;  // (pushed depth, surface reach, 0 if one-sided else 1, c): blended MIN in RGB, added in alpha
 #elif PASS == 2 && defined(AA)
 layout(location = 0) out vec4 f_layer[LAYERS];  // (RGB c, c) of each layer
 #elif PASS == 2
@@ -319,7 +321,7 @@ void main() {
     // The pushed depth (below 1, so the later passes see every marked pixel),
     // kept the least by a MIN blend, and c, summed by an additive one (twice
     // for a one-sided splat whose back is culled: the back's share).
-    f_visible = vec4(clamp(z + fs_in.pushz, 0.0, 0.99999), z + surface_reach(h, sw, hit), 0.0, c * fs_in.sided);
+    f_visible = vec4(clamp(z + fs_in.pushz, 0.0, 0.99999), z + surface_reach(h, sw, hit), fs_in.sided > 1.5 ? 0.0 : 1.0, c * fs_in.sided);
 #elif PASS == 2
     uvec4 surfaces = imageLoad(u_surfaces, ivec2(gl_FragCoord.xy));
     int layer = layer_of(u, surfaces);

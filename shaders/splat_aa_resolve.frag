@@ -11,7 +11,8 @@
 // The rule (aniso3d/rendering/splat/reference.py is its NumPy twin):
 //   within a surface, splats tile: its coverage is a = min(1, sum c);
 //   the nearest surface is whole (a = 1) where the mean of min(1, sum) over
-//     the pixel and its four neighbours reaches CLOSE_MEAN, a neighbour
+//     the pixel and its four neighbours reaches CLOSE_MEAN (CLOSE_MEAN_SIDED
+//     where the pixel holds a one-sided splat, u_visible's blue 0), a neighbour
 //     counting when its nearest surface starts less than CLOSE_REACH u_span
 //     slices from this one's (0 otherwise, and off the image): sub-pixel
 //     footprints (boxes at the splats' centres) do not tile a sheet exactly,
@@ -35,9 +36,10 @@
 #ifndef LAYERS
 #define LAYERS 4
 #endif
-#ifndef CLOSE_MEAN  // injected from aniso3d/rendering/splat/params.py (AA_CLOSE)
+#ifndef CLOSE_MEAN  // injected from aniso3d/rendering/splat/params.py (AA_CLOSE, AA_CLOSE_SIDED)
 #define CLOSE_MEAN 0.9
 #define CLOSE_REACH 3.0
+#define CLOSE_MEAN_SIDED 0.9
 #endif
 
 uniform sampler2D u_layer[LAYERS];
@@ -83,19 +85,22 @@ float neighbour(ivec2 q, ivec2 size, float start) {
 // Whether the nearest surface, summing to own here and starting at slice
 // start, is whole (see the top). Four calls, not a loop over an array of
 // offsets: llvmpipe puts an indexed local array in memory.
-bool whole(ivec2 px, float own, float start) {
-    // Above 1 it is whole anyway; below 5 CLOSE_MEAN - 4 the neighbours cannot make it.
-    if (!(own >= 5.0 * CLOSE_MEAN - 4.0 && own < 1.0)) return false;
+bool whole(ivec2 px, float own, float start, float mean) {
+    // Above 1 it is whole anyway; below 5 mean - 4 the neighbours cannot make it.
+    if (!(own >= 5.0 * mean - 4.0 && own < 1.0)) return false;
     ivec2 size = textureSize(u_layer[0], 0);
     float sum = own + neighbour(px + ivec2(1, 0), size, start) + neighbour(px - ivec2(1, 0), size, start)
               + neighbour(px + ivec2(0, 1), size, start) + neighbour(px - ivec2(0, 1), size, start);
-    return sum >= 5.0 * CLOSE_MEAN;
+    return sum >= 5.0 * mean;
 }
 
 void main() {
     ivec2 px = ivec2(gl_FragCoord.xy);
-    float visible = texelFetch(u_visible, px, 0).r;  // 1 where no splat was drawn
+    vec4 seen = texelFetch(u_visible, px, 0);
+    float visible = seen.r;  // 1 where no splat was drawn
     if (!(visible < 1.0)) discard;
+    // A closed surface seen from outside (a one-sided splat: blue 0) has no holes.
+    float mean = seen.b < 0.5 ? CLOSE_MEAN_SIDED : CLOSE_MEAN;
     vec3 colour = vec3(0.0);
     float trans = 1.0;
     uint sw = texelFetch(u_surfaces, px, 0).w;
@@ -104,7 +109,7 @@ void main() {
     vec4 first = texelFetch(u_layer[0], px, 0);
     vec4 acc;
     float front = first.a;
-    layer(first, LAYERS == 1 ? last : 1.0, first.a, LAYERS > 1 && whole(px, first.a, float(sw & 0xFFFFu)), colour, trans);
+    layer(first, LAYERS == 1 ? last : 1.0, first.a, LAYERS > 1 && whole(px, first.a, float(sw & 0xFFFFu), mean), colour, trans);
 #if LAYERS > 1
     LAYER(1);
 #endif

@@ -478,7 +478,8 @@ def test_a_closed_surfaces_rim_stays_one_surface(r, monkeypatch):
     # the rays, its splats' planes meet a pixel's ray at scattered depths, and
     # with the span alone their fragments split into surfaces that composed
     # as independent layers, letting the background through
-    # (AA_SURFACE_REACH = 0 below). The nearest surface reaching as far as its
+    # (AA_SURFACE_REACH = 0 below: pixels at 0.92 even with the closure of
+    # closed surfaces). The nearest surface reaching as far as its
     # fragments' depths change across a pixel keeps the rim whole.
     from scipy import ndimage
 
@@ -502,4 +503,23 @@ def test_a_closed_surfaces_rim_stays_one_surface(r, monkeypatch):
     view = FrameView(cam, r.lighting, SIZE, *cam.clip_range(cloud.bounds))
     monkeypatch.setattr(params, "AA_SURFACE_REACH", 0.0)
     _, alpha = twin(cloud, view)
-    assert alpha[inside].min() < 0.95 and (alpha[inside] < 0.99).sum() >= 5
+    assert alpha[inside].min() < 0.95 and (alpha[inside] < 0.99).sum() >= 3
+
+
+@pytest.mark.parametrize("counts, whole", [(1.0, False), (2.0, True)])
+def test_a_closed_surface_closes_a_pinhole_a_sheet_keeps(counts, whole):
+    # A 3 x 3 image: the centre pixel covered 0.2 by a surface that covers
+    # its four neighbours whole, at one depth. The mean over the five, 0.84,
+    # is below AA_CLOSE's 0.9, so a two-sided sheet keeps the pinhole; a
+    # closed surface seen from outside (one-sided splats, counted twice) has
+    # no holes, and AA_CLOSE_SIDED (0.8) takes the centre as whole.
+    from aniso3d.rendering.splat import params
+
+    assert params.AA_CLOSE_SIDED <= 0.84 < params.AA_CLOSE[0]
+    pixels = np.array([4, 1, 3, 5, 7])  # the centre, then its four neighbours
+    cover = np.array([0.2, 1.0, 1.0, 1.0, 1.0])
+    frags = Fragments(pixels, cover, np.full(5, 10.0), np.tile(RED, (5, 1)), (3, 3), (0.0, 1.0, 2.0),
+                      np.full(5, counts))  # fmt: skip
+    rgb, alpha = composite_np(frags, WHITE)
+    assert alpha[1, 1] == pytest.approx(1.0 if whole else 0.2)
+    assert np.allclose(rgb[1, 1], RED if whole else 0.2 * np.array(RED) + 0.8 * np.array(WHITE))

@@ -163,7 +163,7 @@ class HighPass:
         # additive one; blending costs llvmpipe far less than an image atomic
         # per fragment) and the occupancy mask.
         tg.nearest_fbo.use()
-        tg.nearest_fbo.clear(1.0, 1.0, 0.0, 0.0)
+        tg.nearest_fbo.clear(1.0, 1.0, 1.0, 0.0)
         ctx.disable(moderngl.DEPTH_TEST)
         ctx.enable(moderngl.BLEND)
         ctx.blend_equation = (moderngl.MIN, moderngl.FUNC_ADD)

@@ -63,6 +63,15 @@ AA_SPAN_MIN = 2.0
 #: neighbour sums closed the edges of resolved splats (sums up to the size
 #: factor squared), 0.12 dB off the lattice close up.
 AA_CLOSE = (0.9, 3.0)
+#: The ``mean`` of AA_CLOSE where the pixel holds a one-sided splat whose
+#: back is culled (a closed surface seen from outside, which has no holes):
+#: close up, resolved discs of a curved closed surface left pinholes that
+#: showed the background (the blob at 128^3, voxels of 3.4 pixels). Measured
+#: on the corpus's one-sided scenes (docs/splat_aa.md, bench_splat_rim
+#: --closure): 0.8 gives the blob +1.7 dB close up and every other scene
+#: within 0.1 dB; 0.7 gives the blob +2.6 dB but the cube -3.6 dB minified
+#: (its edges closed where they are not whole), 0.6 more so.
+AA_CLOSE_SIDED = 0.8
 #: A fragment's depth in quality "high" is where its pixel's ray meets the
 #: splat's plane, kept within the splat's bounding sphere grown by this many
 #: pixels (at the splat's depth): the fragments of a tilted surface tiled by

@@ -30,7 +30,6 @@ from aniso3d.rendering.splat.culling import depth_range, large_blocks
 from aniso3d.rendering.splat.geometry import mask_slicing
 from aniso3d.rendering.splat.options import SplatOptions
 from aniso3d.rendering.splat.params import (
-    AA_CLOSE,
     AA_FILTER,
     AA_LAYERS,
     AA_PLANE_REACH,
@@ -180,8 +179,9 @@ class SplatPipeline:
         plane, for an early depth test)."""
         defines: dict[str, object] = {}
         if aa:
-            mean, reach_ = (float(x) for x in AA_CLOSE)
-            defines = {"LAYERS": AA_LAYERS, "WORDS": AA_SLICES // 32, "CLOSE_MEAN": mean, "CLOSE_REACH": reach_}
+            mean, reach_ = (float(x) for x in params.AA_CLOSE)
+            defines = {"LAYERS": AA_LAYERS, "WORDS": AA_SLICES // 32, "CLOSE_MEAN": mean, "CLOSE_REACH": reach_,
+                       "CLOSE_MEAN_SIDED": float(params.AA_CLOSE_SIDED)}  # fmt: skip
         if far:
             defines["FAR"] = 1
         prog = self.gl.program("splat_resolve.vert", fragment, defines=defines)

@@ -68,7 +68,7 @@ from aniso3d.rendering.lighting import shade_np
 from aniso3d.rendering.splat import params
 from aniso3d.rendering.splat.geometry import mask_slicing
 from aniso3d.rendering.splat.options import SplatOptions
-from aniso3d.rendering.splat.params import AA_CLOSE, AA_FILTER, AA_LAYERS, AA_PLANE_REACH, AA_REGIME, AA_SLICES
+from aniso3d.rendering.splat.params import AA_FILTER, AA_LAYERS, AA_PLANE_REACH, AA_REGIME, AA_SLICES
 from aniso3d.rendering.splat.pipeline import outside
 
 #: Fragments covering less of their pixel than this are dropped (splat.frag).
@@ -371,11 +371,14 @@ def _shifted(a: np.ndarray, dy: int, dx: int, fill: float) -> np.ndarray:
     return out
 
 
-def closed_np(own: np.ndarray, start: np.ndarray, span: float) -> np.ndarray:
+def closed_np(own: np.ndarray, start: np.ndarray, span: float, sided: np.ndarray | None = None) -> np.ndarray:
     """(H, W) bool: where the nearest surface is whole (rule step 5), from its
     sum of coverages ``own`` (H, W) and first slice ``start`` (H, W; inf
-    where the pixel holds nothing)."""
-    min_mean, reach = AA_CLOSE
+    where the pixel holds nothing); ``sided`` (H, W) bool: the pixel holds a
+    one-sided splat drawn with its back culled (the mean is then
+    :data:`~aniso3d.rendering.splat.params.AA_CLOSE_SIDED`)."""
+    mean, reach = (float(x) for x in params.AA_CLOSE)
+    min_mean = mean if sided is None else np.where(sided, float(params.AA_CLOSE_SIDED), mean)
     total = np.minimum(own, 1.0)
     for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0)):
         c, s = _shifted(own, dy, dx, 0.0), _shifted(start, dy, dx, np.inf)
@@ -431,7 +434,10 @@ def composite_np(
     cw = c * np.where(j > 0, (1.0 - mean_cover[pixel]) ** j, 1.0)
     np.add.at(weight, (pixel, layer), cw)
     np.add.at(colour, (pixel, layer), rgb * cw[:, None])
-    whole = closed_np(total[:, 0].reshape(h, w), starts[:, 0].reshape(h, w), span).ravel() & (layers > 1)
+    sided = None
+    if frags.counts is not None:
+        sided = np.bincount(pixel, np.asarray(frags.counts, np.float64)[keep] > 1, w * h).reshape(h, w) > 0
+    whole = closed_np(total[:, 0].reshape(h, w), starts[:, 0].reshape(h, w), span, sided).ravel() & (layers > 1)
     out = np.zeros((w * h, 3))
     trans = np.ones(w * h)
     last = np.maximum(count - (layers - 1), 1).astype(np.float64)
