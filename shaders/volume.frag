@@ -459,7 +459,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
             vec2 fill_share = unpackHalf2x16(sh.y);
             float share = 1.0 - (1.0 - fill_share.y) * (1.0 - zoom);
             // (A surface sheet keeps its runs' near and far sides.)
-            float sv = (fill_share.y >= RUN_SHARE && foot > 0.0) ? 1.0 : vis;
+            float sv = fill_share.y >= RUN_SHARE ? 1.0 : vis;
             float fill = sv * share * fill_share.x;
             vec2 area_slack = unpackHalf2x16(sh.z);
             float a_s = sv * share * area_slack.x;

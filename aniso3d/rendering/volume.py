@@ -270,7 +270,8 @@ RUN_GRAZE = 0.03
 #: than it is, and its back covers where the front leaves a gap (1 thinned
 #: the corpus lattice minified by 5 % of its alpha and cost it 0.5 dB;
 #: ``demos/bench_thin_solids.py --backs``, docs/coverage.md). Surface sheets
-#: (runs) keep both sides: a silhouette's far side is part of its filter.
+#: (:data:`RUN_SHARE`) keep both sides: a silhouette's far side is part of
+#: its filter, and a tangent's planes may be crossed on the far side only.
 BACK_HIDE = 0.75
 #: uint32 words per shading entry on the GPU (four uvec4; see volume.frag).
 ENTRY_WORDS = 16
@@ -788,10 +789,8 @@ def sheet_terms(
     chords = np.asarray(chords, np.float64).reshape(V)
     pixels = pixels_v[owner]
     share = sheet_share(sh.share[at], pixels)
-    # Surface sheets, counted in runs, keep a closed surface's back (vis).
-    with np.errstate(divide="ignore"):
-        foot0 = np.zeros(len(rows)) if edges == "sampled" else 1.0 / pixels
-    sv = np.where((foot0 > 0.0) & (sh.share[at] >= RUN_SHARE), 1.0, vis)
+    # Surface sheets (counted in runs) keep a closed surface's back (vis).
+    sv = np.where(sh.share[at] >= RUN_SHARE, 1.0, vis)
     nh, a_s, fill = sh.normal[at], sv * share * sh.area[at], sv * share * sh.fill[at]
     nw = nh @ w
     projected = np.bincount(owner, a_s * np.abs(nw), minlength=V)
