@@ -22,7 +22,8 @@
 // sizes in pixels over which every sheet fades in (render/volume.py:
 // sheet_share); u_edge_filter 1 to count the share of the pixel's footprint
 // that crosses each sheet, 0 to count the centre ray's crossing alone
-// (render/volume.py:crossing_fraction); u_background RGB; the lighting
+// (render/volume.py:crossing_fraction); u_back_hide the share of a closed
+// surface's back the planar law hides (render/volume.py:BACK_HIDE); u_background RGB; the lighting
 // uniforms of lighting.glsl.
 // In (laid out by aniso3d/rendering/volume.py:pack_volume; 2D textures t_top ...
 // t_dirs, TEX_WIDTH texels a row, or with PLAIN_MARCH the same arrays as SSBOs):
@@ -42,7 +43,9 @@
 //                slack), its edges (render/sheet_edges.py:edge_words: a
 //                halo, area 0, has its edge's face in bits 8-10); the rest
 //                of its linear model across its plane as half2 pairs (S22,
-//                dkd/du, dkd/dv: render/sheet_slopes.py, smooth_sheet())
+//                dkd/du, dkd/dv: render/sheet_slopes.py, smooth_sheet()) and
+//                sigma, the entry's closed (outward) vector area over its
+//                area times normal (render/volume.py:closed_sign)
 //   5 dirs[]     vec4, the K sample directions N_p (xyz)
 // Out: f_color = (C + T * background, 1 - T), C the premultiplied colour and
 // T the transmittance left; gl_FragDepth where 1 - T first reaches 0.5 (1.0
@@ -108,6 +111,7 @@ uniform int u_opacity_mode;
 uniform float u_pixel_angle;
 uniform vec2 u_sheet_pixels;
 uniform float u_edge_filter;
+uniform float u_back_hide;
 uniform vec3 u_background;
 #ifdef INSTANCED
 flat in vec3 v_forward;
@@ -419,6 +423,9 @@ void composite(int v, vec3 x_in, float t0, float chord) {
     vec3 col_f = vec3(0.0);
     float sum_f = 0.0;
     vec3 view = -g_d;
+    // planar: the backs of closed surfaces (render/volume.py:back_terms).
+    float hide = u_opacity_mode == 3 ? u_back_hide : 0.0;
+    float v_dot_w = 0.0;       // V . w: the closed facets' outward vector area along the ray
     for (uint e = e0; e < e1; ++e) {
         uvec4 a = ENT(4u * e);
         uvec4 b = ENT(4u * e + 1u);
@@ -429,14 +436,20 @@ void composite(int v, vec3 x_in, float t0, float chord) {
         float shininess = unpackHalf2x16(b.z).x;
         base_w += area * abs(dot(n, g_d));
         base_nb += area * abs(n * g_nbdir);
+        // Its closed part faces away from the eye (a solid's back): hidden
+        // but for a share 1 - u_back_hide (the front is drawn spread).
+        float closed = unpackHalf2x16(ENT(4u * e + 3u).w).y;
+        float nwo = closed * dot(n, g_d);
+        v_dot_w += area * nwo;
+        float vis = nwo > 0.0 ? 1.0 - hide * min(abs(closed), 1.0) : 1.0;
         vec3 ns = u_normal_mode == 0 ? n : DIR(b.z >> 16u).xyz;
-        float wgt = area * abs(dot(ns, g_d));
+        float wgt = vis * area * abs(dot(ns, g_d));
         // The mean normal's length is its facets' coherence (lighting.glsl).
         vec3 c = clamp(shade(ns, view, vec3(kd_rg, kd_b_ks.x), kd_b_ks.y, shininess, length(n)), 0.0, 1.0);
         col_w += wgt * c;
         sum_w += wgt;
-        col_a += area * c;
-        sum_a += area;
+        col_a += vis * area * c;
+        sum_a += vis * area;
         if (sheets) {
             uvec4 sh = ENT(4u * e + 2u);
             // A halo (render/sheet_edges.py) counts in runs only.
@@ -445,9 +458,11 @@ void composite(int v, vec3 x_in, float t0, float chord) {
             if (halo && !(u_opacity_mode == 3 && foot > 0.0)) continue;
             vec2 fill_share = unpackHalf2x16(sh.y);
             float share = 1.0 - (1.0 - fill_share.y) * (1.0 - zoom);
-            float fill = share * fill_share.x;
+            // (A surface sheet keeps its runs' near and far sides.)
+            float sv = fill_share.y >= RUN_SHARE ? 1.0 : vis;
+            float fill = sv * share * fill_share.x;
             vec2 area_slack = unpackHalf2x16(sh.z);
-            float a_s = share * area_slack.x;
+            float a_s = sv * share * area_slack.x;
             float len_n = length(n);
             vec3 nh = len_n > 0.0 ? n / len_n : vec3(0.0);
             float nw = dot(nh, g_d);
@@ -556,7 +571,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
             if (!halo) sheet_proj += a_s * abs(nw);
             crossed += ws;
             col_s += ws * c;
-            float wf = max(area - a_s, 0.0) * abs(dot(ns, g_d));
+            float wf = vis * max(area - a_s, 0.0) * abs(dot(ns, g_d));
             col_f += wf * c;
             sum_f += wf;
         }
@@ -571,6 +586,8 @@ void composite(int v, vec3 x_in, float t0, float chord) {
     } else {
         density = dot(g_nbw, dn);
     }
+    // What the backs add to the density along the ray: max(0, V . w).
+    density = max(density - hide * max(v_dot_w, 0.0), 0.0);
     vec3 color = sum_w > 1e-7 * sum_a ? col_w / sum_w : (sum_a > 0.0 ? col_a / sum_a : vec3(0.0));
     // Per unit length (grid units) both laws have optical depth sigma, and
     // the mean chord 1/P gives coverage min(1, D/P).

@@ -49,7 +49,7 @@ def test_each_renderer_declares_its_options_as_a_frozen_dataclass(method):
 def test_option_names_are_what_front_ends_read():
     assert SplatOptions.names() == ("splat", "quality", "size_factor", "aspect", "push", "pixel_error")
     assert VolumeOptions.names() == (
-        "step", "density", "normal", "shading", "opacity", "pixel_error", "march", "edges", "start"
+        "step", "density", "normal", "shading", "opacity", "pixel_error", "march", "edges", "start", "back_hide"
     )
     assert MeshOptions.names() == ()
     assert "quality" in SplatOptions.names() and "quality" not in VolumeOptions.names()
@@ -66,6 +66,9 @@ def test_option_names_are_what_front_ends_read():
         (VolumeOptions, {"density": 3}, "density"),
         (VolumeOptions, {"shading": "phong"}, "'phong'"),
         (VolumeOptions, {"pixel_error": -1.0}, "pixel_error"),
+        (VolumeOptions, {"back_hide": 1.5}, "back_hide"),
+        (VolumeOptions, {"back_hide": -0.1}, "back_hide"),
+        (VolumeOptions, {"back_hide": "half"}, "back_hide"),
         (BuildOptions, {"resolution": 0}, "resolution"),
         (BuildOptions, {"resolution": 2.5}, "resolution"),
         (BuildOptions, {"directions": True}, "directions"),
