@@ -320,6 +320,25 @@ float edge_angle(uint code) {
     return float(code) * (6.283185307179586 / 256.0) - 3.141592653589793;
 }
 
+// Share of the pixel's footprint on the covered side of a half-plane's
+// line (entry word 11 `w`: bits 11-18 the angle theta of its inward normal
+// u in the tangent frame of nh, bits 19-30 its offset c) where the ray
+// crosses the sheet's plane nh.x = d at p: (p - q0).u - c from the line in
+// the plane (q0 the plane's point nearest the voxel's centre), times
+// |n.w| / sqrt(1 - (t.w)^2) seen along the ray (t = n x u): a ramp over the
+// footprint, 1/2 on the line. Mirrors render/sheet_halfplanes.py:halfplane_ramp.
+float halfplane_ramp(uint w, vec3 p, vec3 nh, float nw, float d, float foot) {
+    float theta = edge_angle((w >> 11u) & 255u);
+    float c = (float((w >> 19u) & 4095u) / 4095.0 * 2.0 - 1.0) * HALF_C_RANGE;
+    vec3 t1 = normalize(cross(nh, abs(nh.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0)));
+    vec3 t2 = cross(nh, t1);
+    vec3 u = cos(theta) * t1 + sin(theta) * t2;
+    float e = dot(p - (vec3(0.5) - (dot(nh, vec3(0.5)) - d) * nh), u) - c;
+    float tw = dot(cross(nh, u), g_d);
+    float dist = e * abs(nw) / sqrt(max(1.0 - tw * tw, 1e-12));
+    return clamp(0.5 + dist / max(foot, 1e-12), 0.0, 1.0);
+}
+
 // The shaded colour of sheet e (unit normal nh, of length len_n stored:
 // its coherence; plane nh.x = d; reflectance kd) at the point p of its
 // plane, by its linear model across the plane (render/sheet_slopes.py: the
@@ -444,8 +463,11 @@ void composite(int v, vec3 x_in, float t0, float chord) {
             bool halo = halo_face != 7u;
             if (halo && !(u_opacity_mode == 3 && foot > 0.0)) continue;
             vec2 fill_share = unpackHalf2x16(sh.y);
-            float share = 1.0 - (1.0 - fill_share.y) * (1.0 - zoom);
-            float fill = share * fill_share.x;
+            // A half-plane (render/sheet_halfplanes.py): a surface sheet
+            // with an edge inside the voxel, where the footprint is filtered.
+            bool hp = (sh.w >> 31u) == 1u && u_opacity_mode == 3 && foot > 0.0;
+            float share = hp ? 1.0 : 1.0 - (1.0 - fill_share.y) * (1.0 - zoom);
+            float fill = hp ? 1.0 : share * fill_share.x;
             vec2 area_slack = unpackHalf2x16(sh.z);
             float a_s = share * area_slack.x;
             float len_n = length(n);
@@ -465,7 +487,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                 float hi = -min(s_in, s_out) + slack;
                 bool hit = lo <= 0.0 && hi >= 0.0;
                 float th = clamp(nw != 0.0 ? -s_in / nw : 0.0, 0.0, chord);
-                if (foot > 0.0 && fill_share.y >= RUN_SHARE) {
+                if (foot > 0.0 && (fill_share.y >= RUN_SHARE || hp)) {
                     // A surface sheet: to the run. The footprint's rays,
                     // offset along the normal by up to half its width there,
                     // cross inside the voxel where the offset is in [lo, hi].
@@ -483,6 +505,10 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                         float sgn = halo ? -1.0 : 1.0;
                         if (f0 != 7u) ramp *= edge_factors(f0, ((sh.w >> 3u) & 1u) == 1u, edge_angle((sh.w >> 11u) & 255u), p, nh, nw, foot, sgn);
                         if (f1 != 7u) ramp *= edge_factors(f1, ((sh.w >> 7u) & 1u) == 1u, edge_angle((sh.w >> 19u) & 255u), p, nh, nw, foot, sgn);
+                    }
+                    if (hp) {
+                        vec3 p = x_in + g_d * (nw != 0.0 ? -s_in / nw : 0.0);
+                        ramp *= halfplane_ramp(sh.w, p, nh, nw, uintBitsToFloat(sh.x), foot);
                     }
                     float band_all = fill * crossing_fraction(lo + slack, hi - slack, half_w);
                     float band = band_all * ramp.x;

@@ -126,6 +126,8 @@ from aniso3d.rendering.frame import DrawStats, FrameView
 from aniso3d.rendering.lighting import Lighting, shade_np
 from aniso3d.rendering.select import volume_level
 from aniso3d.rendering.sheet_edges import GRID_PAD, MAX_EDGES, SheetEdges, edge_factors, edge_words, sheet_edges
+from aniso3d.rendering.sheet_halfplanes import C_RANGE as HALF_C_RANGE
+from aniso3d.rendering.sheet_halfplanes import SheetHalfplanes, halfplane_ramp, halfplane_words, sheet_halfplanes
 from aniso3d.rendering.sheet_slopes import SheetSlopes, sheet_slopes, smoothed
 
 #: Brick edge in voxels of the two-level index.
@@ -730,7 +732,13 @@ def sheet_terms(
     chords = np.asarray(chords, np.float64).reshape(V)
     pixels = pixels_v[owner]
     share = sheet_share(sh.share[at], pixels)
-    nh, a_s, fill = sh.normal[at], share * sh.area[at], share * sh.fill[at]
+    # Half-planes (sheet_halfplanes): surface sheets with an edge inside
+    # the voxel, where the footprint is filtered.
+    with np.errstate(divide="ignore"):
+        filtered = (opacity == "planar") & (edges == "filtered") & (1.0 / pixels > 0.0)
+    halfp = layout.halfplanes.mask[rows] & filtered if layout is not None else np.zeros(len(rows), bool)
+    share = np.where(halfp, 1.0, share)
+    nh, a_s, fill = sh.normal[at], share * sh.area[at], np.where(halfp, 1.0, share * sh.fill[at])
     nw = nh @ w
     projected = np.bincount(owner, a_s * np.abs(nw), minlength=V)
     counted, band, t_hit = np.zeros(len(rows)), np.zeros(len(rows)), np.zeros(len(rows))
@@ -742,12 +750,19 @@ def sheet_terms(
         x, ch = x_in[owner], chords[owner]
         s_in = np.einsum("ek,ek->e", nh, x) - sh.offset[at]
         hit, band_all, t_hit, foot, lo, hi = _crossings(s_in, nw, ch, sh.slack[at], a_s, pixels, edges)
-        surface = (foot > 0.0) & (sh.share[at] >= RUN_SHARE) & (a_s > 0)
+        surface = (foot > 0.0) & ((sh.share[at] >= RUN_SHARE) | halfp) & (a_s > 0)
         ramp = np.ones((len(rows), 2))
         if layout is not None and surface.any():
             e = np.flatnonzero(surface & (layout.edges.face[rows] >= 0).any(axis=1))
             if len(e):
                 ramp[e] = _edge_ramps(layout.edges, rows[e], None, x[e], nh[e], s_in[e], nw[e], w, foot[e])
+            e = np.flatnonzero(surface & halfp)
+            if len(e):
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    p = x[e] + w[None, :] * np.where(nw[e] != 0.0, -s_in[e] / nw[e], 0.0)[:, None]
+                hpl = layout.halfplanes
+                ramp[e] *= halfplane_ramp(hpl.angle[rows[e]], hpl.offset[rows[e]], sh.offset[at][e], p, nh[e], w,
+                                          foot[e])[:, None]  # fmt: skip
         band = np.where(surface, fill * band_all * ramp[:, 0], 0.0)
         counted = np.where(surface, np.where(hit, fill * ramp[:, 0], band), 0.0)
         weight = np.where(surface, np.where(hit, fill, fill * band_all) * ramp[:, 1], 0.0)
@@ -874,6 +889,7 @@ class SheetLayout:
     halo_keys: np.ndarray
     halo_order: np.ndarray
     slopes: SheetSlopes
+    halfplanes: SheetHalfplanes
 
 
 def sheet_layout(texture: AnisoTexture) -> SheetLayout:
@@ -885,7 +901,8 @@ def sheet_layout(texture: AnisoTexture) -> SheetLayout:
     pshape = np.asarray(texture.shape, dtype=np.int64) + 2 * GRID_PAD
     keys = cell_keys(ed.halo_cell + GRID_PAD, pshape)
     order = np.argsort(keys, kind="stable")
-    return SheetLayout(sheets, ed, keys[order], order, SheetSlopes(half(sl.shape), half(sl.kd)))
+    hp = sheet_halfplanes(texture, sheets, sheets.share >= RUN_SHARE)
+    return SheetLayout(sheets, ed, keys[order], order, SheetSlopes(half(sl.shape), half(sl.kd)), hp)
 
 
 # ------------------------------------------------------------ the NumPy ray
@@ -1255,6 +1272,9 @@ def pack_volume_grid(texture: AnisoTexture) -> PackedVolume:
     entries[:, 10] = area_slack.view(np.uint32).ravel()
     edges = sheet_edges(texture, sheets, sheets.share >= RUN_SHARE)
     entries[:, 11] = edge_words(edges.face, edges.kind, edges.angle)
+    # A half-plane has no edges on faces: its words take the edges' angles' bits.
+    halfplanes = sheet_halfplanes(texture, sheets, sheets.share >= RUN_SHARE)
+    entries[:, 11] = np.where(halfplanes.mask, (entries[:, 11] & 0x7FF) | halfplane_words(halfplanes), entries[:, 11])
     slopes = sheet_slopes(texture, sheets, sheets.share >= RUN_SHARE)
     # (S11, S12), (S22, dkd_r/du), (dkd_r/dv, dkd_g/du), (dkd_g/dv, dkd_b/du), (dkd_b/dv, 0).
     model = np.concatenate([slopes.shape, slopes.kd.transpose(0, 2, 1).reshape(E, 6), np.zeros((E, 1))], axis=1)
@@ -1444,6 +1464,7 @@ class VolumeRenderer:
             "RUN_GAP": RUN_GAP,
             "GRID_PAD": GRID_PAD,
             "CLIP_MARGIN": CLIP_MARGIN,
+            "HALF_C_RANGE": HALF_C_RANGE,
         }
         self._defines = defines
         #: Compile the density, normal and opacity modes into the program (one
