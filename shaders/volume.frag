@@ -65,7 +65,8 @@ vec3 g_light_dir[4];
 // (coverage cap below 1 so the optical depth stays finite), T_MIN (early
 // termination; T_MIN_PLAIN in the plain marching), BIG (stands for an
 // infinite ray parameter), RUN_SHARE, RUN_GAP, RUN_PARALLEL, RUN_STEEP and RUN_GRAZE
-// (the runs of surface sheets: render/volume.py:sheet_terms).
+// (the runs of surface sheets: render/volume.py:sheet_terms), HALF_C_RANGE
+// and HALF_PIXELS (half-planes: render/sheet_halfplanes.py).
 
 uniform vec2 u_size;
 uniform vec3 u_forward;
@@ -464,8 +465,9 @@ void composite(int v, vec3 x_in, float t0, float chord) {
             if (halo && !(u_opacity_mode == 3 && foot > 0.0)) continue;
             vec2 fill_share = unpackHalf2x16(sh.y);
             // A half-plane (render/sheet_halfplanes.py): a surface sheet
-            // with an edge inside the voxel, where the footprint is filtered.
-            bool hp = (sh.w >> 31u) == 1u && u_opacity_mode == 3 && foot > 0.0;
+            // with an edge inside the voxel, where the footprint is filtered
+            // and the voxel spans HALF_PIXELS or more.
+            bool hp = (sh.w >> 31u) == 1u && u_opacity_mode == 3 && foot > 0.0 && pixels >= HALF_PIXELS;
             float share = hp ? 1.0 : 1.0 - (1.0 - fill_share.y) * (1.0 - zoom);
             float fill = hp ? 1.0 : share * fill_share.x;
             vec2 area_slack = unpackHalf2x16(sh.z);

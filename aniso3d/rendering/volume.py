@@ -127,6 +127,7 @@ from aniso3d.rendering.lighting import Lighting, shade_np
 from aniso3d.rendering.select import volume_level
 from aniso3d.rendering.sheet_edges import GRID_PAD, MAX_EDGES, SheetEdges, edge_factors, edge_words, sheet_edges
 from aniso3d.rendering.sheet_halfplanes import C_RANGE as HALF_C_RANGE
+from aniso3d.rendering.sheet_halfplanes import HALF_PIXELS
 from aniso3d.rendering.sheet_halfplanes import SheetHalfplanes, halfplane_ramp, halfplane_words, sheet_halfplanes
 from aniso3d.rendering.sheet_slopes import SheetSlopes, sheet_slopes, smoothed
 
@@ -735,7 +736,7 @@ def sheet_terms(
     # Half-planes (sheet_halfplanes): surface sheets with an edge inside
     # the voxel, where the footprint is filtered.
     with np.errstate(divide="ignore"):
-        filtered = (opacity == "planar") & (edges == "filtered") & (1.0 / pixels > 0.0)
+        filtered = (opacity == "planar") & (edges == "filtered") & (1.0 / pixels > 0.0) & (pixels >= HALF_PIXELS)
     halfp = layout.halfplanes.mask[rows] & filtered if layout is not None else np.zeros(len(rows), bool)
     share = np.where(halfp, 1.0, share)
     nh, a_s, fill = sh.normal[at], share * sh.area[at], np.where(halfp, 1.0, share * sh.fill[at])
@@ -1465,6 +1466,7 @@ class VolumeRenderer:
             "GRID_PAD": GRID_PAD,
             "CLIP_MARGIN": CLIP_MARGIN,
             "HALF_C_RANGE": HALF_C_RANGE,
+            "HALF_PIXELS": HALF_PIXELS,
         }
         self._defines = defines
         #: Compile the density, normal and opacity modes into the program (one
