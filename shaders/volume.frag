@@ -489,7 +489,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                 float hi = -min(s_in, s_out) + slack;
                 bool hit = lo <= 0.0 && hi >= 0.0;
                 float th = clamp(nw != 0.0 ? -s_in / nw : 0.0, 0.0, chord);
-                if (foot > 0.0 && (fill_share.y >= RUN_SHARE || hp)) {
+                if (foot > 0.0 && fill_share.y >= RUN_SHARE) {
                     // A surface sheet: to the run. The footprint's rays,
                     // offset along the normal by up to half its width there,
                     // cross inside the voxel where the offset is in [lo, hi].
@@ -507,10 +507,6 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                         float sgn = halo ? -1.0 : 1.0;
                         if (f0 != 7u) ramp *= edge_factors(f0, ((sh.w >> 3u) & 1u) == 1u, edge_angle((sh.w >> 11u) & 255u), p, nh, nw, foot, sgn);
                         if (f1 != 7u) ramp *= edge_factors(f1, ((sh.w >> 7u) & 1u) == 1u, edge_angle((sh.w >> 19u) & 255u), p, nh, nw, foot, sgn);
-                    }
-                    if (hp) {
-                        vec3 p = x_in + g_d * (nw != 0.0 ? -s_in / nw : 0.0);
-                        ramp *= halfplane_ramp(sh.w, p, nh, nw, uintBitsToFloat(sh.x), foot);
                     }
                     float band_all = fill * crossing_fraction(lo + slack, hi - slack, half_w);
                     float band = band_all * ramp.x;
@@ -577,8 +573,15 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                         if (side == 1 && !halo) g_run_far += vec4(wc * cr, wc);
                     }
                 } else if (hit) {
+                    // A partial sheet crossed: its fill, or a half-plane's
+                    // share of the footprint on its covered side (not in a
+                    // run: leaves in a voxel are independent).
                     ws = fill;
-                    t_cross += fill * th;
+                    if (hp) {
+                        vec3 p = x_in + g_d * (nw != 0.0 ? -s_in / nw : 0.0);
+                        ws *= halfplane_ramp(sh.w, p, nh, nw, uintBitsToFloat(sh.x), foot);
+                    }
+                    t_cross += ws * th;
                 }
             }
             if (!halo) sheet_proj += a_s * abs(nw);

@@ -751,19 +751,12 @@ def sheet_terms(
         x, ch = x_in[owner], chords[owner]
         s_in = np.einsum("ek,ek->e", nh, x) - sh.offset[at]
         hit, band_all, t_hit, foot, lo, hi = _crossings(s_in, nw, ch, sh.slack[at], a_s, pixels, edges)
-        surface = (foot > 0.0) & ((sh.share[at] >= RUN_SHARE) | halfp) & (a_s > 0)
+        surface = (foot > 0.0) & (sh.share[at] >= RUN_SHARE) & (a_s > 0)
         ramp = np.ones((len(rows), 2))
         if layout is not None and surface.any():
             e = np.flatnonzero(surface & (layout.edges.face[rows] >= 0).any(axis=1))
             if len(e):
                 ramp[e] = _edge_ramps(layout.edges, rows[e], None, x[e], nh[e], s_in[e], nw[e], w, foot[e])
-            e = np.flatnonzero(surface & halfp)
-            if len(e):
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    p = x[e] + w[None, :] * np.where(nw[e] != 0.0, -s_in[e] / nw[e], 0.0)[:, None]
-                hpl = layout.halfplanes
-                ramp[e] *= halfplane_ramp(hpl.angle[rows[e]], hpl.offset[rows[e]], sh.offset[at][e], p, nh[e], w,
-                                          foot[e])[:, None]  # fmt: skip
         band = np.where(surface, fill * band_all * ramp[:, 0], 0.0)
         counted = np.where(surface, np.where(hit, fill * ramp[:, 0], band), 0.0)
         weight = np.where(surface, np.where(hit, fill, fill * band_all) * ramp[:, 1], 0.0)
@@ -780,6 +773,14 @@ def sheet_terms(
             run_c = c.copy()
             run_c[e] = _entry_colors(texture, w, lighting, normal, rows[e], at=there)[0]
         ws = np.where(hit & ~surface, fill, 0.0)
+        # A half-plane crossed: the share of the footprint on its covered
+        # side (per voxel, not in a run: leaves in a voxel are independent).
+        e = np.flatnonzero(hit & ~surface & halfp)
+        if len(e):
+            with np.errstate(divide="ignore", invalid="ignore"):
+                p = x[e] + w[None, :] * np.where(nw[e] != 0.0, -s_in[e] / nw[e], 0.0)[:, None]
+            hpl = layout.halfplanes
+            ws[e] *= halfplane_ramp(hpl.angle[rows[e]], hpl.offset[rows[e]], sh.offset[at][e], p, nh[e], w, foot[e])
         keep = (counted > 0.0) | (weight > 0.0)
         run = {"voxel": owner[keep], "normal": nh[keep], "nw": nw[keep], "band": band[keep],
                "hit": np.where(hit, fill * ramp[:, 0], 0.0)[keep], "counted": counted[keep],
