@@ -95,7 +95,8 @@ def main() -> None:
                 for k in ("1-spp", "2x2", "volume", "splat high"):
                     s = split(crop["truth"], crop[k], bg)
                     print(f"  {k:10s} {s['psnr']:6.2f} {s['flip']:.4f}  {s['band']:5.2f} {s['inside']:5.2f}  "
-                          f"{s['band_ok']:12.2f} {s['inside_ok']:10.2f} {s['alpha_err']:10.3f} {s['colour']:7.2f}")  # fmt: skip
+                          f"{s['band_ok']:12.2f} {s['inside_ok']:10.2f} {s['alpha_err']:10.3f} "
+                          f"{s['colour']:7.2f}")  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -196,7 +196,7 @@ def test_leaves_in_the_middle_of_voxels_are_no_half_planes():
     rng = np.random.default_rng(2)
     centres = (np.stack(np.meshgrid(*[np.arange(4)] * 3, indexing="ij"), -1).reshape(-1, 3) + 0.5) / 4
     quads = []
-    for k, cen in enumerate(centres):
+    for cen in centres:  # a few dozen leaves: the test's setup, not the code under test
         r = np.linalg.qr(rng.normal(size=(3, 3)))[0]
         quads.append(aniso3d.scenes.quad(0.1, (0, 0, 0)).vertices @ r.T + cen)
     v = np.concatenate(quads)

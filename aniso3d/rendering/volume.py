@@ -127,8 +127,13 @@ from aniso3d.rendering.lighting import Lighting, shade_np
 from aniso3d.rendering.select import volume_level
 from aniso3d.rendering.sheet_edges import GRID_PAD, MAX_EDGES, SheetEdges, edge_factors, edge_words, sheet_edges
 from aniso3d.rendering.sheet_halfplanes import C_RANGE as HALF_C_RANGE
-from aniso3d.rendering.sheet_halfplanes import HALF_PIXELS
-from aniso3d.rendering.sheet_halfplanes import SheetHalfplanes, halfplane_ramp, halfplane_words, sheet_halfplanes
+from aniso3d.rendering.sheet_halfplanes import (
+    HALF_PIXELS,
+    SheetHalfplanes,
+    halfplane_ramp,
+    halfplane_words,
+    sheet_halfplanes,
+)
 from aniso3d.rendering.sheet_slopes import SheetSlopes, sheet_slopes, smoothed
 
 #: Brick edge in voxels of the two-level index.
