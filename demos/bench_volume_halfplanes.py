@@ -17,8 +17,11 @@ the corpus bench does:
 - the half-planes: how many entries are read as half-planes, and the
   seconds their fit adds to the upload (median of 3).
 
+``--half-pixels`` draws half-planes from that voxel size in pixels on (the
+renderer's ``HALF_PIXELS``, default 2).
+
     .venv/bin/python demos/bench_volume_halfplanes.py [SCENE ...] [--size 512]
-        [--frames 5] [--md docs/coverage.md]
+        [--frames 5] [--half-pixels 2] [--md docs/coverage.md]
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ from aniso3d.bench.run import run_scenes
 from aniso3d.build import scenes
 from aniso3d.build.texture import build_texture
 from aniso3d.rendering import sheet_halfplanes as hp
+from aniso3d.rendering import volume
 from aniso3d.rendering.renderer import Renderer
 from aniso3d.rendering.volume import RUN_SHARE, entry_sheets
 
@@ -108,8 +112,10 @@ def main() -> None:
     ap.add_argument("--resolution", type=int, default=128)
     ap.add_argument("--directions", type=int, default=16)
     ap.add_argument("--frames", type=int, default=5)
+    ap.add_argument("--half-pixels", type=float, default=hp.HALF_PIXELS)
     ap.add_argument("--md", default="", help="Markdown file to write the table into (between its markers)")
     args = ap.parse_args()
+    volume.HALF_PIXELS = args.half_pixels  # compiled into the renderer's shader when it is made
 
     run = run_scenes(args.scenes, args.size, lambda name, renderer: run_scene(name, args, renderer))
     rows = run.rows
@@ -133,7 +139,8 @@ def main() -> None:
     parts = [
         BEGIN,
         run.header(f"demos/bench_volume_halfplanes.py {' '.join(args.scenes)} --size {args.size} "
-                   f"--frames {args.frames}") + " "
+                   f"--frames {args.frames}" + (f" --half-pixels {args.half_pixels:g}"
+                                                if args.half_pixels != hp.HALF_PIXELS else "")) + " "
         f"Texture {args.resolution}^3, K = {args.directions}; truth {args.gt_ssaa}x{args.gt_ssaa} polygons; errors "
         "inside the object's box, as the corpus bench. The images are deterministic, so PSNR, FLIP and edge error "
         "have no spread; frame times are the median [fastest-slowest] of the frames, the two modes drawn in turn.",
