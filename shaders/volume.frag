@@ -40,7 +40,8 @@
 //                voxel-local coordinates, the voxel being the unit cube),
 //                half2(fill, static share), half2(sheet area, crossing
 //                slack), its edges (render/sheet_edges.py:edge_words: a
-//                halo, area 0, has its edge's face in bits 8-10); the rest
+//                halo, area 0, has its edge's face in bits 8-10; bit 31 set:
+//                a half-plane, render/sheet_halfplanes.py:halfplane_words); the rest
 //                of its linear model across its plane as half2 pairs (S22,
 //                dkd/du, dkd/dv: render/sheet_slopes.py, smooth_sheet())
 //   5 dirs[]     vec4, the K sample directions N_p (xyz)

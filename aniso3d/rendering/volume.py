@@ -888,8 +888,9 @@ class SheetLayout:
     upload derives the same, :func:`pack_volume`): every entry's
     :class:`EntrySheets`, the surface sheets' :class:`~aniso3d.rendering.sheet_edges.SheetEdges`
     and :class:`~aniso3d.rendering.sheet_slopes.SheetSlopes` (as the GPU
-    stores them, float16), and the halos' cells as keys of the grid with its
-    margin (sorted, with the halo indices in that order)."""
+    stores them, float16), the halos' cells as keys of the grid with its
+    margin (sorted, with the halo indices in that order), and the partial
+    sheets' :class:`~aniso3d.rendering.sheet_halfplanes.SheetHalfplanes`."""
 
     sheets: EntrySheets
     edges: SheetEdges
@@ -1211,7 +1212,8 @@ def pack_volume(texture: AnisoTexture) -> dict[str, np.ndarray]:
     two-level index (``top``, ``pool``), ``offsets``, ``density`` (float16
     pairs in uint32), ``entries`` (:data:`ENTRY_WORDS` uint32 per entry: the
     shading entry and its sheet, :func:`entry_sheets`, with its edges and
-    after its voxel's entries the halos there, :func:`sheet_edges`) and
+    after its voxel's entries the halos there, :func:`sheet_edges`; or its
+    half-plane, :func:`~aniso3d.rendering.sheet_halfplanes.sheet_halfplanes`) and
     ``directions``, over the GPU grid (:func:`pack_volume_grid`). CPU only;
     checks the texture holds finite numbers."""
     return pack_volume_grid(texture).arrays
