@@ -41,7 +41,8 @@
 //                voxel-local coordinates, the voxel being the unit cube),
 //                half2(fill, static share), half2(sheet area, crossing
 //                slack), its edges (render/sheet_edges.py:edge_words: a
-//                halo, area 0, has its edge's face in bits 8-10); the rest
+//                halo, area 0, has its edge's face in bits 8-10; bit 31 set:
+//                a half-plane, render/sheet_halfplanes.py:halfplane_words); the rest
 //                of its linear model across its plane as half2 pairs (S22,
 //                dkd/du, dkd/dv: render/sheet_slopes.py, smooth_sheet()) and
 //                sigma, the entry's closed (outward) vector area over its
@@ -68,7 +69,8 @@ vec3 g_light_dir[4];
 // (coverage cap below 1 so the optical depth stays finite), T_MIN (early
 // termination; T_MIN_PLAIN in the plain marching), BIG (stands for an
 // infinite ray parameter), RUN_SHARE, RUN_GAP, RUN_PARALLEL, RUN_STEEP and RUN_GRAZE
-// (the runs of surface sheets: render/volume.py:sheet_terms).
+// (the runs of surface sheets: render/volume.py:sheet_terms), HALF_C_RANGE
+// and HALF_PIXELS (half-planes: render/sheet_halfplanes.py).
 
 uniform vec2 u_size;
 uniform vec3 u_forward;
@@ -324,6 +326,25 @@ float edge_angle(uint code) {
     return float(code) * (6.283185307179586 / 256.0) - 3.141592653589793;
 }
 
+// Share of the pixel's footprint on the covered side of a half-plane's
+// line (entry word 11 `w`: bits 11-18 the angle theta of its inward normal
+// u in the tangent frame of nh, bits 19-30 its offset c) where the ray
+// crosses the sheet's plane nh.x = d at p: (p - q0).u - c from the line in
+// the plane (q0 the plane's point nearest the voxel's centre), times
+// |n.w| / sqrt(1 - (t.w)^2) seen along the ray (t = n x u): a ramp over the
+// footprint, 1/2 on the line. Mirrors render/sheet_halfplanes.py:halfplane_ramp.
+float halfplane_ramp(uint w, vec3 p, vec3 nh, float nw, float d, float foot) {
+    float theta = edge_angle((w >> 11u) & 255u);
+    float c = (float((w >> 19u) & 4095u) / 4095.0 * 2.0 - 1.0) * HALF_C_RANGE;
+    vec3 t1 = normalize(cross(nh, abs(nh.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0)));
+    vec3 t2 = cross(nh, t1);
+    vec3 u = cos(theta) * t1 + sin(theta) * t2;
+    float e = dot(p - (vec3(0.5) - (dot(nh, vec3(0.5)) - d) * nh), u) - c;
+    float tw = dot(cross(nh, u), g_d);
+    float dist = e * abs(nw) / sqrt(max(1.0 - tw * tw, 1e-12));
+    return clamp(0.5 + dist / max(foot, 1e-12), 0.0, 1.0);
+}
+
 // The shaded colour of sheet e (unit normal nh, of length len_n stored:
 // its coherence; plane nh.x = d; reflectance kd) at the point p of its
 // plane, by its linear model across the plane (render/sheet_slopes.py: the
@@ -457,10 +478,14 @@ void composite(int v, vec3 x_in, float t0, float chord) {
             bool halo = halo_face != 7u;
             if (halo && !(u_opacity_mode == 3 && foot > 0.0)) continue;
             vec2 fill_share = unpackHalf2x16(sh.y);
-            float share = 1.0 - (1.0 - fill_share.y) * (1.0 - zoom);
+            // A half-plane (render/sheet_halfplanes.py): a surface sheet
+            // with an edge inside the voxel, where the footprint is filtered
+            // and the voxel spans HALF_PIXELS or more.
+            bool hp = (sh.w >> 31u) == 1u && u_opacity_mode == 3 && foot > 0.0 && pixels >= HALF_PIXELS;
+            float share = hp ? 1.0 : 1.0 - (1.0 - fill_share.y) * (1.0 - zoom);
             // (A surface sheet keeps its runs' near and far sides.)
             float sv = fill_share.y >= RUN_SHARE ? 1.0 : vis;
-            float fill = sv * share * fill_share.x;
+            float fill = sv * (hp ? 1.0 : share * fill_share.x);
             vec2 area_slack = unpackHalf2x16(sh.z);
             float a_s = sv * share * area_slack.x;
             float len_n = length(n);
@@ -564,8 +589,15 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                         if (side == 1 && !halo) g_run_far += vec4(wc * cr, wc);
                     }
                 } else if (hit) {
+                    // A partial sheet crossed: its fill, or a half-plane's
+                    // share of the footprint on its covered side (not in a
+                    // run: leaves in a voxel are independent).
                     ws = fill;
-                    t_cross += fill * th;
+                    if (hp) {
+                        vec3 p = x_in + g_d * (nw != 0.0 ? -s_in / nw : 0.0);
+                        ws *= halfplane_ramp(sh.w, p, nh, nw, uintBitsToFloat(sh.x), foot);
+                    }
+                    t_cross += ws * th;
                 }
             }
             if (!halo) sheet_proj += a_s * abs(nw);

@@ -126,6 +126,14 @@ from aniso3d.rendering.frame import DrawStats, FrameView
 from aniso3d.rendering.lighting import Lighting, shade_np
 from aniso3d.rendering.select import volume_level
 from aniso3d.rendering.sheet_edges import GRID_PAD, MAX_EDGES, SheetEdges, edge_factors, edge_words, sheet_edges
+from aniso3d.rendering.sheet_halfplanes import C_RANGE as HALF_C_RANGE
+from aniso3d.rendering.sheet_halfplanes import (
+    HALF_PIXELS,
+    SheetHalfplanes,
+    halfplane_ramp,
+    halfplane_words,
+    sheet_halfplanes,
+)
 from aniso3d.rendering.sheet_slopes import SheetSlopes, sheet_slopes, smoothed
 
 #: Brick edge in voxels of the two-level index.
@@ -789,9 +797,15 @@ def sheet_terms(
     chords = np.asarray(chords, np.float64).reshape(V)
     pixels = pixels_v[owner]
     share = sheet_share(sh.share[at], pixels)
+    # Half-planes (sheet_halfplanes): surface sheets with an edge inside
+    # the voxel, where the footprint is filtered.
+    with np.errstate(divide="ignore"):
+        filtered = (opacity == "planar") & (edges == "filtered") & (1.0 / pixels > 0.0) & (pixels >= HALF_PIXELS)
+    halfp = layout.halfplanes.mask[rows] & filtered if layout is not None else np.zeros(len(rows), bool)
+    share = np.where(halfp, 1.0, share)
     # Surface sheets (counted in runs) keep a closed surface's back (vis).
     sv = np.where(sh.share[at] >= RUN_SHARE, 1.0, vis)
-    nh, a_s, fill = sh.normal[at], sv * share * sh.area[at], sv * share * sh.fill[at]
+    nh, a_s, fill = sh.normal[at], sv * share * sh.area[at], sv * np.where(halfp, 1.0, share * sh.fill[at])
     nw = nh @ w
     projected = np.bincount(owner, a_s * np.abs(nw), minlength=V)
     counted, band, t_hit = np.zeros(len(rows)), np.zeros(len(rows)), np.zeros(len(rows))
@@ -825,6 +839,14 @@ def sheet_terms(
             run_c = c.copy()
             run_c[e] = _entry_colors(texture, w, lighting, normal, rows[e], at=there)[0]
         ws = np.where(hit & ~surface, fill, 0.0)
+        # A half-plane crossed: the share of the footprint on its covered
+        # side (per voxel, not in a run: leaves in a voxel are independent).
+        e = np.flatnonzero(hit & ~surface & halfp)
+        if len(e):
+            with np.errstate(divide="ignore", invalid="ignore"):
+                p = x[e] + w[None, :] * np.where(nw[e] != 0.0, -s_in[e] / nw[e], 0.0)[:, None]
+            hpl = layout.halfplanes
+            ws[e] *= halfplane_ramp(hpl.angle[rows[e]], hpl.offset[rows[e]], sh.offset[at][e], p, nh[e], w, foot[e])
         keep = (counted > 0.0) | (weight > 0.0)
         run = {"voxel": owner[keep], "normal": nh[keep], "nw": nw[keep], "band": band[keep],
                "hit": np.where(hit, fill * ramp[:, 0], 0.0)[keep], "counted": counted[keep],
@@ -927,14 +949,16 @@ class SheetLayout:
     upload derives the same, :func:`pack_volume`): every entry's
     :class:`EntrySheets`, the surface sheets' :class:`~aniso3d.rendering.sheet_edges.SheetEdges`
     and :class:`~aniso3d.rendering.sheet_slopes.SheetSlopes` (as the GPU
-    stores them, float16), and the halos' cells as keys of the grid with its
-    margin (sorted, with the halo indices in that order)."""
+    stores them, float16), the halos' cells as keys of the grid with its
+    margin (sorted, with the halo indices in that order), and the partial
+    sheets' :class:`~aniso3d.rendering.sheet_halfplanes.SheetHalfplanes`."""
 
     sheets: EntrySheets
     edges: SheetEdges
     halo_keys: np.ndarray
     halo_order: np.ndarray
     slopes: SheetSlopes
+    halfplanes: SheetHalfplanes
 
 
 def sheet_layout(texture: AnisoTexture) -> SheetLayout:
@@ -946,7 +970,8 @@ def sheet_layout(texture: AnisoTexture) -> SheetLayout:
     pshape = np.asarray(texture.shape, dtype=np.int64) + 2 * GRID_PAD
     keys = cell_keys(ed.halo_cell + GRID_PAD, pshape)
     order = np.argsort(keys, kind="stable")
-    return SheetLayout(sheets, ed, keys[order], order, SheetSlopes(half(sl.shape), half(sl.kd)))
+    hp = sheet_halfplanes(texture, sheets, sheets.share >= RUN_SHARE)
+    return SheetLayout(sheets, ed, keys[order], order, SheetSlopes(half(sl.shape), half(sl.kd)), hp)
 
 
 # ------------------------------------------------------------ the NumPy ray
@@ -1255,7 +1280,8 @@ def pack_volume(texture: AnisoTexture) -> dict[str, np.ndarray]:
     two-level index (``top``, ``pool``), ``offsets``, ``density`` (float16
     pairs in uint32), ``entries`` (:data:`ENTRY_WORDS` uint32 per entry: the
     shading entry and its sheet, :func:`entry_sheets`, with its edges and
-    after its voxel's entries the halos there, :func:`sheet_edges`) and
+    after its voxel's entries the halos there, :func:`sheet_edges`; or its
+    half-plane, :func:`~aniso3d.rendering.sheet_halfplanes.sheet_halfplanes`) and
     ``directions``, over the GPU grid (:func:`pack_volume_grid`). CPU only;
     checks the texture holds finite numbers."""
     return pack_volume_grid(texture).arrays
@@ -1323,6 +1349,9 @@ def pack_volume_grid(texture: AnisoTexture) -> PackedVolume:
     entries[:, 10] = area_slack.view(np.uint32).ravel()
     edges = sheet_edges(texture, sheets, sheets.share >= RUN_SHARE)
     entries[:, 11] = edge_words(edges.face, edges.kind, edges.angle)
+    # A half-plane has no edges on faces: its words take the edges' angles' bits.
+    halfplanes = sheet_halfplanes(texture, sheets, sheets.share >= RUN_SHARE)
+    entries[:, 11] = np.where(halfplanes.mask, (entries[:, 11] & 0x7FF) | halfplane_words(halfplanes), entries[:, 11])
     slopes = sheet_slopes(texture, sheets, sheets.share >= RUN_SHARE)
     # (S11, S12), (S22, dkd_r/du), (dkd_r/dv, dkd_g/du), (dkd_g/dv, dkd_b/du), (dkd_b/dv, sigma).
     sigma = closed_sign(texture)[:, None]
@@ -1520,6 +1549,8 @@ class VolumeRenderer:
             "RUN_GAP": RUN_GAP,
             "GRID_PAD": GRID_PAD,
             "CLIP_MARGIN": CLIP_MARGIN,
+            "HALF_C_RANGE": HALF_C_RANGE,
+            "HALF_PIXELS": HALF_PIXELS,
         }
         self._defines = defines
         #: Compile the density, normal and opacity modes into the program (one
