@@ -287,12 +287,13 @@ def test_twin_agrees_on_a_thin_beam():
 
     from aniso3d.rendering.camera import Camera
 
-    r = Renderer()
     beam, _ = thin_beam()
     tex = build_texture(beam, 32, 16, bounds=BEAM_BOUNDS)
     size = (96, 96)
     cam = Camera((9.0, 13.0, 55.0), (0.0, 0.0, 0.0), fov=30.0)
-    img, _ = render_float(r, tex, cam, size)
+    with Renderer() as r:
+        img, _ = render_float(r, tex, cam, size)
+        lighting = r.lighting
     dirs, t0, t1 = pixel_rays(cam, size, tex.bounds)
     a = img[..., 3]
     partial, opaque = np.argwhere((a > 0.03) & (a < 0.97)), np.argwhere(a >= 0.97)
@@ -301,7 +302,7 @@ def test_twin_agrees_on_a_thin_beam():
     picks = np.concatenate([partial[rng.choice(len(partial), 30)], opaque[rng.choice(len(opaque), 10)]])
     for y, x in picks:
         rgb, alpha = march_ray_np(
-            tex, cam.position, dirs[y, x], r.lighting, (t0[y, x], t1[y, x]), pixel_angle=pixel_angle(cam, size)
+            tex, cam.position, dirs[y, x], lighting, (t0[y, x], t1[y, x]), pixel_angle=pixel_angle(cam, size)
         )
         got = img[y, x]
         assert np.abs(rgb - got[:3]).max() < 1 / 255 and abs(alpha - got[3]) < 1 / 255, (y, x, rgb, alpha, got)

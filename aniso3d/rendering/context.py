@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import os
+import weakref
 from typing import Any
 
 import moderngl
@@ -134,6 +135,27 @@ def _create(backend: str, device: int | None = None) -> tuple[moderngl.Context, 
     raise ValueError(backend)
 
 
+#: The contexts this process made and has not released, oldest first (weakly),
+#: and the one it last made current. Every OpenGL call goes to the current
+#: context, so a Renderer makes its own current before it draws, uploads or
+#: frees (:meth:`GLContext.use`); destroying a context leaves none current, so
+#: the one current before (else the newest left) is made current again.
+_LIVE: list[weakref.ref] = []
+_CURRENT: weakref.ref | None = None
+
+
+def _current_again(previous: GLContext | None) -> None:
+    """After a context was destroyed: make ``previous`` current again if it
+    lives, else the newest live context of :data:`_LIVE`."""
+    global _CURRENT
+    _LIVE[:] = [w for w in _LIVE if (c := w()) is not None and c.ctx is not None]
+    _CURRENT = None
+    if previous is None or previous.ctx is None:
+        previous = _LIVE[-1]() if _LIVE else None
+    if previous is not None:
+        previous.use()
+
+
 class GLContext:
     """An OpenGL context with a program cache and an inventory of GPU objects.
 
@@ -178,6 +200,9 @@ class GLContext:
         )  # fmt: skip
         self._programs: dict[tuple, moderngl.Program] = {}
         self._objects: list[Any] = []
+        global _CURRENT
+        _LIVE.append(weakref.ref(self))
+        _CURRENT = _LIVE[-1]  # a new context is current
 
     #: False for a context adopted with :meth:`wrap`: its owner releases it.
     _owns_ctx = True
@@ -275,10 +300,29 @@ class GLContext:
     def n_objects(self) -> int:
         return len(self._objects)
 
+    def use(self) -> None:
+        """Make this context current, so that the OpenGL calls that follow
+        reach it and not another live context's objects of the same names (a
+        no-op when it already is, and for an adopted context, which its window
+        keeps current)."""
+        global _CURRENT
+        if not self._owns_ctx or self.ctx is None or (_CURRENT is not None and _CURRENT() is self):
+            return
+        try:
+            self.ctx.__enter__()
+        except Exception:  # a context that cannot be made current here: left as it is
+            return
+        _CURRENT = weakref.ref(self)
+
     def release(self) -> None:
-        """Release every tracked object, every program, then the context."""
+        """Release every tracked object, every program, then the context, with
+        this context current (a release while another was current deleted
+        that one's objects of the same names); the context current before is
+        current again after."""
         if self.ctx is None:
             return
+        previous = _CURRENT() if _CURRENT is not None else None
+        self.use()
         for obj in reversed(self._objects):
             try:
                 obj.release()
@@ -289,7 +333,11 @@ class GLContext:
             prog.release()
         self._programs.clear()
         if self._owns_ctx:
-            self.ctx.release()
+            self.ctx.release()  # leaves no context current
+            self.ctx = None
+            _current_again(None if previous is self else previous)
+        elif previous is not None and previous is not self:
+            previous.use()
         self.ctx = None
         if self._loader is not None:
             self._loader.release()

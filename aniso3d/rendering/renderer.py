@@ -292,6 +292,7 @@ class Renderer:
                 f"level of detail applies to the splat and volume methods, not '{method}'"
             )
         self._concrete(thing, method, b, "upload")
+        self.gl.use()
         # Only what changes the upload keys it.
         used = {"mesh": (), "volume": ("lod",), "splat": ("placement", "per_entry", "point_normal", "lod")}[method]
         if isinstance(thing, Mesh) and method != "mesh":
@@ -430,6 +431,7 @@ class Renderer:
 
     def _draw(self, thing, camera, method, ssaa, alpha, size, build, options, values):
         """Draw one frame into this size's framebuffer; (image, DrawStats, fbo, view)."""
+        self.gl.use()
         if not isinstance(camera, Camera):
             raise InputError(f"render needs an aniso3d.Camera, got {type(camera).__name__}")
         if method is None:
@@ -581,6 +583,7 @@ class Renderer:
 
     def release(self) -> None:
         """Free every upload and framebuffer; the context too if we made it."""
+        self.gl.use()
         self.uploads.clear()
         self.conversions.clear()
         for impl in self._impl.values():
