@@ -263,7 +263,7 @@ def angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def assert_within_bounds(tex: AnisoTexture, got: AnisoTexture, bits: Bits = DEFAULT_BITS) -> None:
     """Every field of ``got`` (``tex`` through the compact encoding) within its stated bound."""
     h = tex.voxel_size
-    for name in ("origin", "shape", "coords", "directions", "entry_offsets", "entry_direction"):
+    for name in ("origin", "shape", "coords", "directions", "entry_offsets", "entry_direction", "entry_side"):
         assert np.array_equal(getattr(got, name), getattr(tex, name)), name
     for name in ARRAYS:
         assert getattr(got, name).dtype == getattr(tex, name).dtype, name
@@ -345,7 +345,7 @@ def assert_within_bounds(tex: AnisoTexture, got: AnisoTexture, bits: Bits = DEFA
 def test_tree_through_a_file_is_within_every_bound(tree_tex, tree_file):
     back = AnisoTexture.load(tree_file)
     f = read_texture_file(tree_file)
-    assert f.version == FORMAT_VERSION == 5 and f.encoding == "compact"
+    assert f.version == FORMAT_VERSION == 6 and f.encoding == "compact"
     with zipfile.ZipFile(tree_file) as zf:
         assert {i.compress_type for i in zf.infolist() if i.filename.endswith(".npy")} == {zipfile.ZIP_LZMA}
         assert zf.getinfo("header.json").compress_type == zipfile.ZIP_DEFLATED
@@ -354,7 +354,7 @@ def test_tree_through_a_file_is_within_every_bound(tree_tex, tree_file):
     for name in ARRAYS:
         a, b = getattr(back, name), getattr(ref, name)
         assert a.dtype == b.dtype and np.array_equal(a, b), name
-    assert back.meta == {**tree_tex.meta, QUANTISED: 5} and back.voxel_size == tree_tex.voxel_size
+    assert back.meta == {**tree_tex.meta, QUANTISED: 6} and back.voxel_size == tree_tex.voxel_size
     assert_within_bounds(tree_tex, back)
 
 
@@ -535,7 +535,10 @@ def _set(name, fn):
 
 
 DAMAGED = [
-    ("future version", dict(header=lambda h: h.update(version=6)), "version 6.*Upgrade aniso3d.*aniso3d build"),
+    ("future version", dict(header=lambda h: h.update(version=7)), "version 7.*Upgrade aniso3d.*aniso3d build"),
+    ("side code above 2", dict(members=_set("entry_side", lambda a: np.where(np.arange(len(a)) == 3, np.uint8(3), a))),
+     "entry_side holds codes above 2"),
+    ("side length", dict(members=_set("entry_side", lambda a: a[:-1])), "entry_side has shape"),
     ("normal shifts short", dict(header=lambda h: h["params"].update(normal_shifts=[0, 1])), "normal_shifts"),
     ("normal shift too coarse", dict(header=lambda h: h["params"]["normal_shifts"].__setitem__(5, 15)),
      "normal_shifts"),
@@ -782,7 +785,7 @@ def test_version_4_compact_file_still_loads():
         np.testing.assert_array_equal(a, b, err_msg=name)
     back = AnisoTexture.load(DATA / "small_tree_v4.a3d")
     assert back.meta[QUANTISED] == 4 and back.meta["source"] == "v4-fixture"
-    # and today's encoding of the same texture is a version 5 one, with shifts
+    # and today's encoding of the same texture has version 5's shifts
     members, params = enc.encode(dict(ref.arrays), ref.voxel_size)
     assert max(params["normal_shifts"]) > 0 and max(params["depth_shifts"]) > 0
 
