@@ -193,13 +193,13 @@ class Bits:
 
     area: int = 11
     normal: int = 10
-    coherence: int = 6
+    coherence: int = 8
     centroid: int = 6
     kd: int = 9
     ks: int = 8
     shininess: int = 8
     density: int = 3
-    depth: int = 10
+    depth: int = 12
     cover: int = 6
 
     def __post_init__(self) -> None:
