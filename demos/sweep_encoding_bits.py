@@ -41,6 +41,13 @@ def parse_bits(text: str):
     return replace(DEFAULT_BITS, **{k: int(v) for k, v in (p.split("=") for p in text.split(","))})
 
 
+def score(r: Renderer, thing, cams, truths, renders) -> dict[str, list[float]]:
+    """PSNR of ``thing`` per renderer and camera, inside each truth's box."""
+    return {method: [psnr(t[ys, xs], r.render(thing, cam, method, **opts)[ys, xs])
+                     for cam, (t, (ys, xs)) in zip(cams, truths, strict=True)]
+            for method, opts in renders}  # fmt: skip
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scenes", nargs="+")
@@ -68,18 +75,13 @@ def main() -> None:
                     gt = r.render(mesh, cam, "mesh", ssaa=8, alpha=True)
                     truths.append((gt[..., :3], be.crop(gt[..., 3])))
 
-                def score(thing) -> dict[str, list[float]]:
-                    return {method: [psnr(t[ys, xs], r.render(thing, cam, method, **opts)[ys, xs])
-                                     for cam, (t, (ys, xs)) in zip(cams, truths, strict=True)]
-                            for method, opts in renders}  # fmt: skip
-
-                base = score(tex)
+                base = score(r, tex, cams, truths, renders)
                 print(f"{name} built " + " ".join(f"{m} {' '.join(f'{v:.3f}' for v in vals)}"
                                                   for m, vals in base.items()), flush=True)  # fmt: skip
                 for text in ["default", *args.variants]:
                     bits = parse_bits(text)
                     size = encoded_size(tex._arrays(), tex.voxel_size, tex.meta, "compact", bits)
-                    got = score(tex.as_stored(bits))
+                    got = score(r, tex.as_stored(bits), cams, truths, renders)
                     parts = []
                     for m, vals in got.items():
                         d = [g - b for g, b in zip(vals, base[m], strict=True)]
