@@ -1,4 +1,4 @@
-"""The compact encoding of a texture: what an ``.a3d`` file of version 5 stores.
+"""The compact encoding of a texture: what an ``.a3d`` file of version 6 stores.
 
 In memory a texture keeps float64 and float32 arrays, about 400 bytes per
 occupied voxel of the default tree. To store it, each field is quantised no
@@ -24,9 +24,9 @@ entry_area                  log2, 11 bits, over [max / 2**24, max]              
 entry_normal (direction)    about the sample direction N_p, 10 bits a coordinate,   0.14 degrees (0.07 at K = 16);
                             or octahedral with 12, whichever deflates smaller;      0.06 degrees; spread normals:
                             fewer bits for spread normals (version 5, below)        sigma / 16 or that
-entry_normal (length) c     6 bits of sqrt(1 - c), steps of 1/63                    sqrt(1 - c) within 1/126
-entry_centroid              in the frame of the decoded normal: depth along it,     depth h/1180 (10 bits),
-                            10 bits, and two tangent coordinates, 6 bits each, on   h/68 in the plane; the
+entry_normal (length) c     8 bits of sqrt(1 - c), steps of 1/255                   sqrt(1 - c) within 1/510
+entry_centroid              in the frame of the decoded normal: depth along it,     depth h/4724 (12 bits),
+                            12 bits, and two tangent coordinates, 6 bits each, on   h/68 in the plane; the
                             [-sqrt(3)/2, sqrt(3)/2] h about the voxel centre        voxel's middle exact;
                             (version 5: fewer depth bits for spread normals)        spread: sigma h / 32 or that
 entry_kd                    9 bits: steps of S/511 over the values' own range,      S/1022
@@ -34,6 +34,8 @@ entry_kd                    9 bits: steps of S/511 over the values' own range,  
 entry_ks                    8 bits, likewise                                        S/510
 entry_shininess             8 bits of log2(1 + n), likewise, S = log2(1 + largest)  log2(1 + n) within S/510
 entry_cover (version 4)     6 bits of 2 (1 - c), c in [0.5, 1]                     1/252; 1 exact
+entry_side (version 6)      per entry, its side mod 3 less its first earlier        exact
+                            neighbour's at its sample direction (below)
 density                     F (see below), plus D - F in 3 bits of A_v              min(|D - F|, A_v / 14)
 ==========================  ======================================================  ===============================
 
@@ -78,6 +80,27 @@ jumping (a few NumPy passes, not a loop over entries). Such an entry's
 centroid lies on its source's plane when their facets are coplanar, so its
 depth code is stored as the difference from the depth of the source's plane
 in its own voxel (mostly 0).
+
+**Sides** (version 6). An entry whose facets all lie on closed,
+consistently wound surfaces is seen from one side only: its points are
+one-sided (:func:`aniso3d.build.texture.entry_sides`). ``entry_side`` keeps
+which (+1: its mean normal points out of its solid, -1: into it, 0: not
+closed), so that a loaded texture makes the built one's points. A side
+mostly repeats the neighbouring voxel's at the same sample direction: each
+is stored modulo 3 less that of its predictor, the entry at its direction
+in the first of the 13 earlier neighbours that has one (known from the
+occupancy), entries without one last; closed and open surfaces alike store
+runs of 0, a few hundred bytes a scene. The decoder sums the residuals along
+the predictors by pointer jumping.
+
+**Why 12 depth bits and 8 length bits** (version 6's defaults; version 5
+wrote 10 and 6). The volume's smooth shading and its runs of surface
+sheets (docs/coverage.md) made the images of smooth surfaces fine enough
+that the old rounding showed: the blob lost 0.31 dB through its file, the
+depth mostly where a voxel spans about two pixels and the length close up,
+where it sets the sheets' crossing tolerance (``sqrt(1 - c)``, which 6 bits
+put on steps of 1/63 voxel; the blob's lie between 0 and 0.016). See
+docs/encoding.md.
 
 A range's two ends decode exactly, so a scene of one material keeps it
 exactly (two: both).

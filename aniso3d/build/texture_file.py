@@ -88,7 +88,7 @@ class TextureFile:
         arrays: every name of :data:`ARRAYS` -> its array (decoded).
         voxel_size: voxel edge h, world units.
         meta: provenance (JSON values only).
-        version: the file's format version (1 or 2).
+        version: the file's format version (1 to 6).
         encoding: "compact" or "exact" (version 1 files are "exact").
     """
 
@@ -108,7 +108,7 @@ def write_texture_file(
     bits: Bits = DEFAULT_BITS,
 ) -> Path:
     """Write ``arrays`` (every name of :data:`ARRAYS`) with the voxel size and
-    the JSON-representable part of ``meta``, atomically, as format version 5
+    the JSON-representable part of ``meta``, atomically, as format version 6
     in ``encoding`` ("compact", quantised with ``bits``, or "exact"), streamed
     into the file. The texture is encoded before the file is touched, so a
     texture that cannot be encoded leaves no file behind."""
