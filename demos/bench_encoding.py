@@ -1,4 +1,4 @@
-"""What the compact texture encoding (``.a3d`` version 5) costs in bytes and in image error.
+"""What the compact texture encoding (``.a3d`` version 6) costs in bytes and in image error.
 
 Per scene: the mesh, built at ``--resolution`` with K = ``--directions``
 (``build_texture``), its sizes (the mesh as a binary PLY: 12 bytes a vertex,
@@ -68,6 +68,9 @@ FIELDS = {
 #: which sample directions each voxel has entries at and which entries copy a
 #: neighbour's normal and materials (exact), the header.
 STRUCTURE = ("origin", "shape", "directions", "coords", "entry_mask", "entry_parent")
+#: Which entries lie on closed surfaces, and on which side (version 6;
+#: exact): a row of its own, bytes only (a texture as built knows them).
+SIDES = ("entry_side",)
 
 #: (row name, field, bits changed): other bit counts tried for one field
 #: (coarser and finer than the defaults: what each bit saves or costs and buys).
@@ -77,10 +80,11 @@ ALTERNATIVES = (
     ("area 10 bits", "area", {"area": 10}),
     ("area 12 bits", "area", {"area": 12}),
     ("normal 9 bits", "normal", {"normal": 9}),
-    ("normal 11 bits", "normal", {"normal": 11, "coherence": 8}),
+    ("normal 11 bits", "normal", {"normal": 11}),
+    ("normal length 6 bits", "normal", {"coherence": 6}),
     ("centroid 8 bits", "centroid", {"centroid": 8}),
-    ("centroid depth 8 bits", "centroid", {"depth": 8}),
-    ("centroid depth 12 bits", "centroid", {"depth": 12}),
+    ("centroid depth 10 bits", "centroid", {"depth": 10}),
+    ("centroid depth 14 bits", "centroid", {"depth": 14}),
     ("kd 8 bits", "kd", {"kd": 8}),
 )
 
@@ -261,6 +265,8 @@ def main() -> None:
         members = res["members"]
         structure = sum(members.get(m, 0) for m in STRUCTURE) + members["header"]
         field_rows.append([res["name"], "structure", mib(structure), f"{structure / res['entries']:.2f}", "", ""])
+        sides = sum(members.get(m, 0) for m in SIDES)
+        field_rows.append([res["name"], "sides", f"{sides:,} B", f"{sides / res['entries']:.4f}", "", ""])
         for row, field, deltas in res["rows"]:
             if row in FIELDS:
                 n = sum(members.get(m, 0) for m in FIELDS[field][1])
@@ -301,9 +307,11 @@ def main() -> None:
                   "F vs D %", "save s", "load s"],
                  size_rows),  # fmt: skip
         "",
-        "**Per field.** Bytes of the field's members in the compact file (compressed) and per shading "
-        "entry; ΔPSNR (dB) of the volume and of the high-quality splats when only that field is "
-        "quantised (`all`: every field, i.e. the loaded file). Negative: worse.",
+        "**Per field.** Bytes of the field's members in the compact file (compressed, with the zip's "
+        "local header) and per shading entry; ΔPSNR (dB) of the volume and of the high-quality splats "
+        "when only that field is quantised (`all`: every field, i.e. the loaded file). Negative: worse. "
+        "`sides`: the member `entry_side` (which entries lie on closed surfaces, and on which side; "
+        "exact), in bytes.",
         "",
         markdown_table(["scene", "field", "bytes", "B / entry", "Δ volume", "Δ splat"], field_rows),
         "",

@@ -263,7 +263,7 @@ def angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def assert_within_bounds(tex: AnisoTexture, got: AnisoTexture, bits: Bits = DEFAULT_BITS) -> None:
     """Every field of ``got`` (``tex`` through the compact encoding) within its stated bound."""
     h = tex.voxel_size
-    for name in ("origin", "shape", "coords", "directions", "entry_offsets", "entry_direction"):
+    for name in ("origin", "shape", "coords", "directions", "entry_offsets", "entry_direction", "entry_side"):
         assert np.array_equal(getattr(got, name), getattr(tex, name)), name
     for name in ARRAYS:
         assert getattr(got, name).dtype == getattr(tex, name).dtype, name
@@ -345,7 +345,7 @@ def assert_within_bounds(tex: AnisoTexture, got: AnisoTexture, bits: Bits = DEFA
 def test_tree_through_a_file_is_within_every_bound(tree_tex, tree_file):
     back = AnisoTexture.load(tree_file)
     f = read_texture_file(tree_file)
-    assert f.version == FORMAT_VERSION == 5 and f.encoding == "compact"
+    assert f.version == FORMAT_VERSION == 6 and f.encoding == "compact"
     with zipfile.ZipFile(tree_file) as zf:
         assert {i.compress_type for i in zf.infolist() if i.filename.endswith(".npy")} == {zipfile.ZIP_LZMA}
         assert zf.getinfo("header.json").compress_type == zipfile.ZIP_DEFLATED
@@ -354,7 +354,7 @@ def test_tree_through_a_file_is_within_every_bound(tree_tex, tree_file):
     for name in ARRAYS:
         a, b = getattr(back, name), getattr(ref, name)
         assert a.dtype == b.dtype and np.array_equal(a, b), name
-    assert back.meta == {**tree_tex.meta, QUANTISED: 5} and back.voxel_size == tree_tex.voxel_size
+    assert back.meta == {**tree_tex.meta, QUANTISED: 6} and back.voxel_size == tree_tex.voxel_size
     assert_within_bounds(tree_tex, back)
 
 
@@ -535,7 +535,10 @@ def _set(name, fn):
 
 
 DAMAGED = [
-    ("future version", dict(header=lambda h: h.update(version=6)), "version 6.*Upgrade aniso3d.*aniso3d build"),
+    ("future version", dict(header=lambda h: h.update(version=7)), "version 7.*Upgrade aniso3d.*aniso3d build"),
+    ("side code above 2", dict(members=_set("entry_side", lambda a: np.where(np.arange(len(a)) == 3, np.uint8(3), a))),
+     "entry_side holds codes above 2"),
+    ("side length", dict(members=_set("entry_side", lambda a: a[:-1])), "entry_side has shape"),
     ("normal shifts short", dict(header=lambda h: h["params"].update(normal_shifts=[0, 1])), "normal_shifts"),
     ("normal shift too coarse", dict(header=lambda h: h["params"]["normal_shifts"].__setitem__(5, 15)),
      "normal_shifts"),
@@ -782,7 +785,7 @@ def test_version_4_compact_file_still_loads():
         np.testing.assert_array_equal(a, b, err_msg=name)
     back = AnisoTexture.load(DATA / "small_tree_v4.a3d")
     assert back.meta[QUANTISED] == 4 and back.meta["source"] == "v4-fixture"
-    # and today's encoding of the same texture is a version 5 one, with shifts
+    # and today's encoding of the same texture has version 5's shifts
     members, params = enc.encode(dict(ref.arrays), ref.voxel_size)
     assert max(params["normal_shifts"]) > 0 and max(params["depth_shifts"]) > 0
 
@@ -899,3 +902,64 @@ def test_each_file_keeps_the_smaller_layout(tree_tex, monkeypatch):
             back = enc.decode(m, p, tree_tex.voxel_size)
             for name in ARRAYS:
                 np.testing.assert_array_equal(back[name], got[name], err_msg=name)
+
+
+def test_version_5_compact_file_still_loads():
+    """tests/data/small_tree_v5.a3d was written by the version 5 writer (at
+    commit 0b52bf1: a small tree and a closed cube, ``build_texture(mesh,
+    12, 16)``), and small_tree_v5_decoded.a3d (exact encoding) holds what that
+    writer's decoder gave for it: version 6's decoder gives exactly those
+    arrays, and every entry two-sided (version 5 kept no sides), where a build
+    of the same mesh makes the cube's points one-sided."""
+    f = read_texture_file(DATA / "small_tree_v5.a3d")
+    assert f.version == 5 and f.encoding == "compact"
+    with zipfile.ZipFile(DATA / "small_tree_v5.a3d") as zf:
+        assert "entry_side.npy" not in zf.namelist()
+    ref = read_texture_file(DATA / "small_tree_v5_decoded.a3d")
+    assert ref.version == 5 and ref.encoding == "exact"
+    for name in ARRAYS:
+        a, b = f.arrays[name], ref.arrays[name]
+        assert a.dtype == b.dtype and a.shape == b.shape, name
+        np.testing.assert_array_equal(a, b, err_msg=name)
+    back = AnisoTexture.load(DATA / "small_tree_v5.a3d")
+    assert back.meta[QUANTISED] == 5 and back.meta["source"] == "v5-fixture"
+    assert not back.entry_side.any() and back.to_points().one_sided is None
+    tree = scenes.tree(levels=3, leaves_per_twig=12)
+    cube = scenes.cube()
+    lo, hi = tree.bounds
+    s = 0.25 * (hi - lo).max() / (cube.bounds[1] - cube.bounds[0]).max()
+    m = np.diag([s, s, s, 1.0])
+    m[:3, 3] = lo - cube.bounds[0] * s
+    from aniso3d.build.mesh import concatenate
+
+    built = build_texture(concatenate([tree, cube.transformed(m)]), 12, 16)
+    assert built.n_entries == back.n_entries and np.array_equal(built.coords, back.coords)
+    assert built.to_points().one_sided.sum() > 20
+    # today's file of the same texture stores the sides
+    members, params = enc.encode(dict(built._arrays()), built.voxel_size)
+    assert np.array_equal(enc.decode(members, params, built.voxel_size)["entry_side"], built.entry_side)
+
+
+def test_sides_decode_along_their_predictors_as_one_by_one():
+    """Version 6 stores each entry's side against the first earlier
+    neighbour's at its sample direction; the decoder sums the residuals
+    along those chains by pointer jumping. Checked against summing them
+    entry by entry in cell order, on sides drawn at random (long chains of
+    every code) and on a closed surface's (a member of nearly nothing)."""
+    tex = build_texture(scenes.sphere(), 32, 16)
+    coords, shape = tex.coords.astype(np.int64), np.asarray(tex.shape, np.int64)
+    pred = enc._side_predictors(coords, shape, tex.entry_voxel, tex.entry_direction.astype(np.int64), 16)
+    assert np.all(pred < np.arange(tex.n_entries)) and np.mean(pred >= 0) > 0.9
+    rng = np.random.default_rng(1)
+    for side in (rng.integers(-1, 2, tex.n_entries).astype(np.int8), tex.entry_side):
+        stored = enc._encode_sides(side, pred)
+        resid = np.empty(tex.n_entries, dtype=np.int64)
+        resid[np.argsort(pred < 0, kind="stable")] = stored
+        code = np.zeros(tex.n_entries, dtype=np.int64)
+        for i in range(tex.n_entries):  # the reference: one entry after another
+            code[i] = (resid[i] + (code[pred[i]] if pred[i] >= 0 else 0)) % 3
+        np.testing.assert_array_equal(np.where(code == 2, -1, code), side)
+        np.testing.assert_array_equal(enc._decode_sides(stored, pred), side)
+    assert np.all(tex.entry_side == 1)
+    # a closed surface's sides: all 0 but the first entry of each chain
+    assert np.count_nonzero(enc._encode_sides(tex.entry_side, pred)) == np.count_nonzero(pred < 0)

@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from aniso3d import PointCloud, ResourceError, build_texture, scenes
+from aniso3d import AnisoTexture, PointCloud, ResourceError, build_texture, scenes
 from aniso3d.bench.corpus import corpus_cameras
 from aniso3d.rendering.camera import Camera
 from aniso3d.rendering.frame import FrameView
@@ -52,7 +52,7 @@ def test_points_of_closed_surfaces_are_one_sided_and_face_out():
     assert back.one_sided.all()
     assert np.all(np.einsum("ij,ij->i", back.normals, back.positions - cube.bounds.mean(axis=0)) > 0)
     np.testing.assert_allclose(back.areas.sum(), pts.areas.sum(), rtol=1e-9)
-    # Open surfaces (a quad; a tree's leaves) and loaded textures: two-sided.
+    # Open surfaces (a quad; a tree's leaves): two-sided.
     assert build_texture(scenes.quad(1.0), 16, 16).to_points().one_sided is None
 
 
@@ -110,3 +110,64 @@ def test_a_closed_objects_outline_is_as_thick_as_its_meshs(name, resolution, siz
     assert abs(err["one"]) < 0.07, err
     assert err["two"] > 0.1, err
     assert math.isfinite(err["one"])
+
+
+# ------------------------------------------------------- through a file (v6)
+
+
+def sided_scene():
+    """Sides +1, -1 and 0: a cube wound outwards, a cube wound inwards, a thin
+    slab (both its faces in one voxel: cover 1/2 as two-sided points) and an
+    open square."""
+    cube = scenes.cube()
+    move = lambda m, x, y, z, sz=1.0: m.transformed(np.array(  # noqa: E731
+        [[1, 0, 0, x], [0, 1, 0, y], [0, 0, sz, z], [0, 0, 0, 1]], dtype=np.float64))
+    inward = type(cube).from_arrays(cube.vertices, cube.faces[:, ::-1])
+    from aniso3d.build.mesh import concatenate
+    return concatenate([cube, move(inward, 2.0, 0.0, 0.0), move(cube, 0.0, 2.0, 0.0, 0.02),
+                        move(scenes.quad(1.0), 2.0, 2.0, 0.0)], name="sided")  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def sided():
+    return build_texture(sided_scene(), 24, 16)
+
+
+def test_the_scene_has_every_side(sided):
+    side = sided.entry_side
+    assert {-1, 0, 1} <= set(np.unique(side).tolist())
+    assert np.any((side != 0) & (sided.entry_cover < 0.9))  # the slab's faces hide each other
+
+
+@pytest.mark.parametrize("encoding", ["compact", "exact"])
+@pytest.mark.parametrize("normal", ["mean", "sample"])
+def test_points_of_a_loaded_texture_are_the_built_ones(sided, tmp_path, encoding, normal):
+    # Loaded from a file, the points are one-sided where the built ones are,
+    # face the same way (out of their solids) and keep the same areas (a
+    # one-sided point of the slab all of its entry's, a two-sided one the
+    # share its cover says). Version 5 files lost the sides: every point
+    # two-sided, the inward cube's facing in, the slab's halved.
+    back = AnisoTexture.load(sided.save(tmp_path / "s.a3d", encoding=encoding))
+    np.testing.assert_array_equal(back.entry_side, sided.entry_side)
+    a, b = sided.to_points(normal=normal), back.to_points(normal=normal)
+    assert a.one_sided is not None and b.one_sided is not None
+    np.testing.assert_array_equal(b.one_sided, a.one_sided)
+    cos = np.einsum("ij,ij->i", a.normals, b.normals)
+    assert cos.min() > math.cos(math.radians(0.2))
+    np.testing.assert_allclose(b.areas, a.areas, rtol=0.005 if encoding == "compact" else 0.0)
+    if encoding == "exact":
+        np.testing.assert_array_equal(b.normals, a.normals)
+
+
+def test_pyramid_levels_of_a_loaded_texture_keep_the_sides(sided):
+    # Coarser levels of a loaded texture merge its entries' sides; the built
+    # texture's levels find theirs from the closed sums: the same sides and
+    # one-sided points at every level.
+    from aniso3d.build.pyramid import pyramid
+
+    built, loaded = pyramid(sided), pyramid(sided.as_stored())
+    assert len(built) == len(loaded) > 3
+    for level, (a, b) in enumerate(zip(built, loaded, strict=True)):
+        np.testing.assert_array_equal(b.entry_side, a.entry_side, err_msg=f"level {level}")
+        np.testing.assert_array_equal(loaded.level_cloud(level)[0].one_sided, built.level_cloud(level)[0].one_sided)
+    assert np.any(built[2].entry_side == -1) and np.any(built[2].entry_side == 1)

@@ -34,9 +34,9 @@ def sphere():
 def test_compact_textures_say_they_are_quantised(sphere, tmp_path):
     _, tex = sphere
     assert not tex.meta.get(QUANTISED)
-    assert tex.as_stored().meta[QUANTISED] == 5
+    assert tex.as_stored().meta[QUANTISED] == 6
     tex.save(tmp_path / "a.a3d")
-    assert AnisoTexture.load(tmp_path / "a.a3d").meta[QUANTISED] == 5
+    assert AnisoTexture.load(tmp_path / "a.a3d").meta[QUANTISED] == 6
     tex.save(tmp_path / "b.a3d", encoding="exact")
     assert not AnisoTexture.load(tmp_path / "b.a3d").meta.get(QUANTISED)
 

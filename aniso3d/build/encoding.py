@@ -1,4 +1,4 @@
-"""The compact encoding of a texture: what an ``.a3d`` file of version 5 stores.
+"""The compact encoding of a texture: what an ``.a3d`` file of version 6 stores.
 
 In memory a texture keeps float64 and float32 arrays, about 400 bytes per
 occupied voxel of the default tree. To store it, each field is quantised no
@@ -24,9 +24,9 @@ entry_area                  log2, 11 bits, over [max / 2**24, max]              
 entry_normal (direction)    about the sample direction N_p, 10 bits a coordinate,   0.14 degrees (0.07 at K = 16);
                             or octahedral with 12, whichever deflates smaller;      0.06 degrees; spread normals:
                             fewer bits for spread normals (version 5, below)        sigma / 16 or that
-entry_normal (length) c     6 bits of sqrt(1 - c), steps of 1/63                    sqrt(1 - c) within 1/126
-entry_centroid              in the frame of the decoded normal: depth along it,     depth h/1180 (10 bits),
-                            10 bits, and two tangent coordinates, 6 bits each, on   h/68 in the plane; the
+entry_normal (length) c     8 bits of sqrt(1 - c), steps of 1/255                   sqrt(1 - c) within 1/510
+entry_centroid              in the frame of the decoded normal: depth along it,     depth h/4724 (12 bits),
+                            12 bits, and two tangent coordinates, 6 bits each, on   h/68 in the plane; the
                             [-sqrt(3)/2, sqrt(3)/2] h about the voxel centre        voxel's middle exact;
                             (version 5: fewer depth bits for spread normals)        spread: sigma h / 32 or that
 entry_kd                    9 bits: steps of S/511 over the values' own range,      S/1022
@@ -34,6 +34,8 @@ entry_kd                    9 bits: steps of S/511 over the values' own range,  
 entry_ks                    8 bits, likewise                                        S/510
 entry_shininess             8 bits of log2(1 + n), likewise, S = log2(1 + largest)  log2(1 + n) within S/510
 entry_cover (version 4)     6 bits of 2 (1 - c), c in [0.5, 1]                     1/252; 1 exact
+entry_side (version 6)      per entry, its side mod 3 less its first earlier        exact
+                            neighbour's at its sample direction (below)
 density                     F (see below), plus D - F in 3 bits of A_v              min(|D - F|, A_v / 14)
 ==========================  ======================================================  ===============================
 
@@ -78,6 +80,27 @@ jumping (a few NumPy passes, not a loop over entries). Such an entry's
 centroid lies on its source's plane when their facets are coplanar, so its
 depth code is stored as the difference from the depth of the source's plane
 in its own voxel (mostly 0).
+
+**Sides** (version 6). An entry whose facets all lie on closed,
+consistently wound surfaces is seen from one side only: its points are
+one-sided (:func:`aniso3d.build.texture.entry_sides`). ``entry_side`` keeps
+which (+1: its mean normal points out of its solid, -1: into it, 0: not
+closed), so that a loaded texture makes the built one's points. A side
+mostly repeats the neighbouring voxel's at the same sample direction: each
+is stored modulo 3 less that of its predictor, the entry at its direction
+in the first of the 13 earlier neighbours that has one (known from the
+occupancy), entries without one last; closed and open surfaces alike store
+runs of 0, a few hundred bytes a scene. The decoder sums the residuals along
+the predictors by pointer jumping.
+
+**Why 12 depth bits and 8 length bits** (version 6's defaults; version 5
+wrote 10 and 6). The volume's smooth shading and its runs of surface
+sheets (docs/coverage.md) made the images of smooth surfaces fine enough
+that the old rounding showed: the blob lost 0.31 dB through its file, the
+depth mostly where a voxel spans about two pixels and the length close up,
+where it sets the sheets' crossing tolerance (``sqrt(1 - c)``, which 6 bits
+put on steps of 1/63 voxel; the blob's lie between 0 and 0.016). See
+docs/encoding.md.
 
 A range's two ends decode exactly, so a scene of one material keeps it
 exactly (two: both).
@@ -131,9 +154,11 @@ from aniso3d.grid import cell_coords, cell_keys, tangent_frame
 #: that hold arrays), what :func:`decode` returns and version 1 files store as they are.
 ARRAYS = ("origin", "shape", "coords", "directions", "density", "entry_offsets",
           "entry_direction", "entry_area", "entry_kd", "entry_ks", "entry_shininess",
-          "entry_centroid", "entry_normal", "entry_cover")  # fmt: skip
+          "entry_centroid", "entry_normal", "entry_cover", "entry_side")  # fmt: skip
+#: The arrays of files of format versions 4 and 5 (no ``entry_side``: read as 0).
+ARRAYS_V5 = ARRAYS[:-1]
 #: The arrays of files before format version 4 (no ``entry_cover``: read as 1).
-ARRAYS_V3 = ARRAYS[:-1]
+ARRAYS_V3 = ARRAYS_V5[:-1]
 
 #: The members of the compact encoding of format version 2, in the order they are written.
 MEMBERS_V2 = ("origin", "shape", "directions", "coords", "entry_mask", "entry_area",
@@ -145,7 +170,9 @@ MEMBERS_V2 = ("origin", "shape", "directions", "coords", "entry_mask", "entry_ar
 #: for the other entries only.
 MEMBERS_V3 = (*MEMBERS_V2[:5], "entry_parent", *MEMBERS_V2[5:])
 #: Version 4's and 5's: version 3's and ``entry_cover``.
-MEMBERS = (*MEMBERS_V3, "entry_cover")
+MEMBERS_V5 = (*MEMBERS_V3, "entry_cover")
+#: Version 6's: version 5's and ``entry_side``.
+MEMBERS = (*MEMBERS_V5, "entry_side")
 #: Fields (members) an entry with a parent copies from it instead of storing.
 COPIED = ("entry_normal", "entry_coherence", "entry_kd", "entry_ks", "entry_shininess")
 
@@ -189,13 +216,13 @@ class Bits:
 
     area: int = 11
     normal: int = 10
-    coherence: int = 6
+    coherence: int = 8
     centroid: int = 6
     kd: int = 9
     ks: int = 8
     shininess: int = 8
     density: int = 3
-    depth: int = 10
+    depth: int = 12
     cover: int = 6
 
     def __post_init__(self) -> None:
@@ -661,6 +688,59 @@ def _decode_cover(codes: np.ndarray, bits: int) -> np.ndarray:
     return 1.0 - codes[0].astype(np.float64) / (2.0 * (2**bits - 1))
 
 
+def _side_predictors(coords: np.ndarray, shape: np.ndarray, voxel: np.ndarray, direction: np.ndarray,
+                     k: int) -> np.ndarray:  # fmt: skip
+    """(E,) int64: for each entry, the entry with the same sample direction in
+    the first of the 13 earlier neighbouring voxels (:data:`PARENT_OFFSETS`)
+    that has one, -1 where none does: the entry whose side predicts its own
+    (version 6). Known to the decoder from the occupancy alone; each points
+    to an earlier entry, so they form a forest."""
+    ekeys = _entry_keys(coords, shape, voxel, direction, k)
+    pred = np.full(len(voxel), -1, dtype=np.int64)
+    for offset in PARENT_OFFSETS:  # thirteen
+        open_ = np.flatnonzero(pred < 0)
+        if not len(open_):
+            break
+        pred[open_] = _neighbour_entries(coords, shape, voxel, direction, k, ekeys, offset, open_)
+    return pred
+
+
+def _encode_sides(side: np.ndarray, pred: np.ndarray) -> np.ndarray:
+    """(N,) uint8, version 6's ``entry_side``: each entry's side s in {-1, 0,
+    1} as ``s mod 3``, less its predictor's (:func:`_side_predictors`)
+    modulo 3 where it has one: 0 wherever a closed (or an open) surface goes
+    on into the neighbouring voxel. Entries with a predictor first, then the
+    others, each in entry order: long runs of 0, which LZMA makes nearly
+    free (a few hundred bytes on the corpus scenes)."""
+    code = np.asarray(side, dtype=np.int64) % 3
+    has = pred >= 0
+    resid = np.where(has, (code - code[np.where(has, pred, 0)]) % 3, code)
+    return resid[_by_shift(~has)].astype(np.uint8)
+
+
+def _decode_sides(stored: np.ndarray, pred: np.ndarray) -> np.ndarray:
+    """The inverse of :func:`_encode_sides`: (E,) int8 sides. Each entry's
+    code is its residual plus its predictor's code, along the predictor
+    forest: summed by pointer jumping (each NumPy pass halves every chain),
+    not entry by entry."""
+    e = len(pred)
+    if stored.dtype != np.uint8 or stored.shape != (e,):
+        raise FormatError(f"entry_side has shape {stored.shape} and dtype {stored.dtype}, expected ({e},) uint8")
+    if e and int(stored.max()) > 2:
+        raise FormatError("entry_side holds codes above 2")
+    acc = np.empty(e, dtype=np.int64)
+    acc[_by_shift(pred < 0)] = stored
+    ptr = pred.copy()
+    while True:  # predictors come earlier, so this ends
+        live = np.flatnonzero(ptr >= 0)
+        if not len(live):
+            break
+        up = ptr[live]
+        acc[live] = (acc[live] + acc[up]) % 3
+        ptr[live] = ptr[up]
+    return np.where(acc == 2, -1, acc).astype(np.int8)
+
+
 def _encode_centroid(centroid, origin, voxel_size, coords, voxel, bits) -> np.ndarray:
     """Version 2's centroids (read by :func:`decode`, no longer written):
     (3, E) codes of each centroid's offset f in [0, 1] inside its voxel, per
@@ -969,7 +1049,8 @@ def _check_shapes(arrays: dict[str, np.ndarray]) -> None:
     e = len(arrays["entry_direction"])
     want = {"origin": (3,), "shape": (3,), "coords": (m, 3), "directions": (k, 3), "density": (m, k),
             "entry_offsets": (m + 1,), "entry_area": (e,), "entry_kd": (e, 3), "entry_ks": (e,),
-            "entry_shininess": (e,), "entry_centroid": (e, 3), "entry_normal": (e, 3), "entry_cover": (e,)}  # fmt: skip
+            "entry_shininess": (e,), "entry_centroid": (e, 3), "entry_normal": (e, 3), "entry_cover": (e,),
+            "entry_side": (e,)}  # fmt: skip
     for name, shape in want.items():
         got = np.shape(arrays[name])
         if got != shape:
@@ -980,6 +1061,9 @@ def _check_shapes(arrays: dict[str, np.ndarray]) -> None:
     d = np.asarray(arrays["entry_direction"])
     if e and (d.min() < 0 or d.max() >= k):
         raise InputError(f"texture entry_direction lies outside 0..{k - 1}; it cannot be encoded")
+    side = np.asarray(arrays["entry_side"])
+    if e and not np.all((side == -1) | (side == 0) | (side == 1)):
+        raise InputError("texture entry_side holds values other than -1, 0 and 1; it cannot be encoded")
 
 
 def _check_finite_nonnegative(arrays: dict[str, np.ndarray]) -> None:
@@ -1094,6 +1178,7 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
     members["entry_kd"] = to_planes(kd_codes[:, roots][:, by_ks], _width(bits.kd))
     cover_codes = _encode_cover(arrays["entry_cover"], bits.cover)
     members["entry_cover"] = cover_codes
+    members["entry_side"] = _encode_sides(arrays["entry_side"], _side_predictors(coords, shape, voxel, direction, k))
     # Areas in entry order (a smooth surface's follow each other), or by their
     # normal's length (a mix of several facets is larger): whichever packs smaller.
     laid = {"entries": to_planes(area_codes, _width(bits.area)),
@@ -1122,7 +1207,7 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
     return members, params
 
 
-def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, version: int = 5
+def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, version: int = 6
            ) -> dict[str, np.ndarray]:
     """The texture arrays (every name of :data:`ARRAYS`, dtypes as
     :func:`~aniso3d.build.texture.build_texture` makes them) of a compact
@@ -1268,6 +1353,11 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
         cover = _decode_cover(cover_codes, bits.cover)
     else:
         cover = np.ones(e)
+    if version >= 6:
+        side = _decode_sides(members["entry_side"], _side_predictors(coords.astype(np.int64), shape, voxel,
+                                                                     direction.astype(np.int64), k))  # fmt: skip
+    else:
+        side = np.zeros(e, dtype=np.int8)
     density = facet_density(area * cover, normal, offsets, dirs)
     if bits.density:
         w = _width(bits.density)
@@ -1295,6 +1385,7 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
         "entry_centroid": centroid,
         "entry_normal": normal,
         "entry_cover": cover.astype(np.float32),
+        "entry_side": side,
     }
 
 

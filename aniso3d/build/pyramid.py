@@ -243,6 +243,9 @@ def coarsen(texture: AnisoTexture) -> tuple[AnisoTexture, np.ndarray]:
         # coarser voxel holding more of a solid hides more, which this misses.
         closed_area = closed_normal = None
         cover = wmean(t.entry_cover).astype(np.float32)
+    side = None
+    if not known:
+        side = _merged_sides(t, einv, E, wmean(t.entry_normal), ekeys % K)
     meta = {k: v for k, v in t.meta.items() if k != "n_subpolygons"}
     meta["lod_level"] = int(t.meta.get("lod_level", 0)) + 1
     coarse = AnisoTexture(
@@ -266,8 +269,32 @@ def coarsen(texture: AnisoTexture) -> tuple[AnisoTexture, np.ndarray]:
         entry_cover=cover,
         entry_closed_area=closed_area,
         entry_closed_normal=closed_normal,
+        entry_side=side,
     )
     return coarse, parent
+
+
+def _merged_sides(t: AnisoTexture, einv: np.ndarray, n: int, normal: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """(n,) int8 sides of the merged entries of a texture without closed sums
+    (loaded from a file; ``einv`` (E,) the merged entry of each of ``t``'s,
+    ``normal`` (n, 3) their mean normals, ``direction`` (n,) their sample
+    directions): what the closed sums would give. A child of side s (against
+    its mean normal m, area A) has the closed vector area ``s A m`` when all
+    its facets lie on one closed surface; a merged entry is on closed
+    surfaces where all its children with area are, and its side is the sign
+    of its normal against the sum of theirs (s where they agree). Where a
+    child mixed surfaces wound both ways this is what is known of it."""
+    side = np.asarray(t.entry_side, dtype=np.float64)
+    area = np.asarray(t.entry_area, dtype=np.float64)
+    open_ = np.bincount(einv, weights=((side == 0) & (area > 0)).astype(np.float64), minlength=n) > 0
+    vec = np.asarray(t.entry_normal, dtype=np.float64) * (side * area)[:, None]
+    closed = np.stack([np.bincount(einv, weights=vec[:, i], minlength=n) for i in range(3)], axis=1)
+    length = np.linalg.norm(normal, axis=1)
+    sample = np.asarray(t.directions, dtype=np.float64)[direction]
+    ref = np.where((length > 1e-6)[:, None], normal / np.maximum(length, 1e-300)[:, None], sample)
+    merged_area = np.bincount(einv, weights=area, minlength=n)
+    out = np.sign(np.einsum("ij,ij->i", ref, closed))
+    return np.where(open_ | (merged_area <= 0), 0, out).astype(np.int8)
 
 
 def _parent_index(fine: AnisoTexture, coarse: AnisoTexture) -> np.ndarray:

@@ -90,7 +90,7 @@ def sphere_directions(k: int, kind: str = "fibonacci", seed: int = 0) -> np.ndar
 #: encoding (loaded from a compact file, or :meth:`AnisoTexture.as_stored`):
 #: its centroids and normals carry the encoding's rounding, which the volume
 #: renderer's sheet crossings allow for (:func:`aniso3d.rendering.volume.entry_sheets`).
-#: Its value is the file's format version (2 to 5; ``True`` in textures saved
+#: Its value is the file's format version (2 to 6; ``True`` in textures saved
 #: before version 3, which came from version 2 files): how fine the rounding is.
 QUANTISED = "quantised"
 
@@ -125,6 +125,13 @@ class AnisoTexture:
             closed surfaces, as built: what :func:`aniso3d.build.pyramid.coarsen`
             needs to find what a coarser voxel's solids hide. Not stored in
             files; None (a loaded texture): unknown.
+        entry_side: (E,) int8, +1 or -1 where every piece of the entry lies
+            on a closed surface (:meth:`~aniso3d.build.mesh.Mesh.closed_sides`)
+            and the entry's mean normal points out of it or into it, 0
+            elsewhere (:func:`entry_sides`, whose points are one-sided where
+            it is not 0). None (default): derived from the closed sums when
+            they are known, else 0 (two-sided). Files store it since format
+            version 6; older ones read as 0.
     """
 
     origin: np.ndarray
@@ -145,6 +152,7 @@ class AnisoTexture:
     entry_cover: np.ndarray | None = None
     entry_closed_area: np.ndarray | None = None
     entry_closed_normal: np.ndarray | None = None
+    entry_side: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         m, k = len(self.coords), len(self.directions)
@@ -179,6 +187,20 @@ class AnisoTexture:
         off = np.asarray(self.entry_offsets)
         if m and (off[0] != 0 or off[-1] != e or np.any(np.diff(off) < 0)):
             raise FormatError("texture entry_offsets are not a valid CSR offset array")
+        if self.entry_side is None:
+            # As built: from the closed sums, against the mean normals (what
+            # files store); unknown: every entry two-sided.
+            side = np.zeros(e, dtype=np.int8)
+            if self.entry_closed_area is not None:
+                side = _closed_sides(self, slice(None), _entry_normals(self, slice(None), "mean"))
+            object.__setattr__(self, "entry_side", side)
+        else:
+            side = np.asarray(self.entry_side)
+            if side.shape != (e,):
+                raise FormatError(f"texture field 'entry_side' has shape {side.shape}, expected {(e,)}")
+            if side.size and not np.all((side == -1) | (side == 0) | (side == 1)):
+                raise FormatError("texture field 'entry_side' holds values other than -1, 0 and 1")
+            object.__setattr__(self, "entry_side", side.astype(np.int8))
 
     # ---------------------------------------------------------------- basics
 
@@ -226,7 +248,7 @@ class AnisoTexture:
     @cached_property
     def nbytes(self) -> int:
         """Bytes of the texture as stored and shipped: the size of the ``.a3d``
-        file :meth:`save` writes by default (format version 5, compact
+        file :meth:`save` writes by default (format version 6, compact
         encoding, LZMA-compressed; :mod:`aniso3d.build.encoding`), computed in memory
         once. :attr:`memory_nbytes` is the size of the arrays in memory."""
         return encoded_size(self._arrays(), self.voxel_size, self.meta)
@@ -389,10 +411,20 @@ def _entry_normals(t: AnisoTexture, ent: slice | np.ndarray, normal: str) -> np.
 def entry_sides(t: AnisoTexture, ent: slice | np.ndarray, normals: np.ndarray) -> np.ndarray:
     """(E,) int8 for the entries ``ent``: +1 or -1 where every piece of the
     entry lies on a closed surface (:meth:`~aniso3d.build.mesh.Mesh.closed_sides`)
-    and ``normals`` point out of it or into it, 0 elsewhere, and for every
-    entry of a texture loaded from a file (which keeps no closed sums)."""
+    and ``normals`` point out of it or into it, 0 elsewhere. From the closed
+    sums where the texture has them (as built), else from ``entry_side``
+    (a file's; 0 in files before version 6), the side against the mean
+    normal, turned where ``normals`` point away from it."""
     if t.entry_closed_area is None:
-        return np.zeros(len(normals), dtype=np.int8)
+        side = np.asarray(t.entry_side)[ent]
+        ref = _entry_normals(t, ent, "mean")
+        turn = np.sign(np.einsum("ij,ij->i", np.asarray(normals, dtype=np.float64), ref))
+        return (side * turn).astype(np.int8)
+    return _closed_sides(t, ent, normals)
+
+
+def _closed_sides(t: AnisoTexture, ent: slice | np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """:func:`entry_sides` from the closed sums (which ``t`` has)."""
     area = np.asarray(t.entry_area, dtype=np.float64)[ent]
     closed = np.asarray(t.entry_closed_area, dtype=np.float64)[ent]
     outward = np.einsum("ij,ij->i", normals, np.asarray(t.entry_closed_normal, dtype=np.float64)[ent])

@@ -9,12 +9,15 @@ fixed compression level).
 
 Versions:
 
-- **5** (written): the header names an *encoding*. ``"compact"`` (the
+- **6** (written): the header names an *encoding*. ``"compact"`` (the
   default) stores the members of :func:`aniso3d.build.encoding.encode`,
   quantised and predicted from neighbouring voxels, LZMA-compressed, and the
   numbers :func:`~aniso3d.build.encoding.decode` needs (``params``, inside
   the checksum); ``"exact"`` stores the texture's arrays as they are,
   deflated.
+- **5** (read only): as 6, without ``entry_side`` (which entries lie on
+  closed surfaces, and on which side: their points are one-sided; read as
+  0, every entry two-sided).
 - **4** (read only): as 5, but the compact members store every entry at
   its field's bits (no coarser steps for spread normals, no ``normal_shifts``
   and ``depth_shifts`` in ``params``) and in entry order; ``entry_mask``
@@ -52,10 +55,12 @@ import numpy as np
 from aniso3d.build.encoding import (
     ARRAYS,
     ARRAYS_V3,
+    ARRAYS_V5,
     DEFAULT_BITS,
     MEMBERS,
     MEMBERS_V2,
     MEMBERS_V3,
+    MEMBERS_V5,
     Bits,
     decode,
     encode,
@@ -69,8 +74,8 @@ __all__ = ["ARRAYS", "ENCODINGS", "FORMAT_NAME", "FORMAT_VERSION", "TextureFile"
 
 FORMAT_NAME = "aniso3d-texture"
 #: The version written; every version from 1 up to it is read.
-FORMAT_VERSION = 5
-#: The encodings of versions 2 to 5: quantised (default) or the arrays as they are.
+FORMAT_VERSION = 6
+#: The encodings of versions 2 to 6: quantised (default) or the arrays as they are.
 ENCODINGS = ("compact", "exact")
 REBUILD = "rebuild it from its mesh ('aniso3d build MESH -o out.a3d')"
 
@@ -83,7 +88,7 @@ class TextureFile:
         arrays: every name of :data:`ARRAYS` -> its array (decoded).
         voxel_size: voxel edge h, world units.
         meta: provenance (JSON values only).
-        version: the file's format version (1 or 2).
+        version: the file's format version (1 to 6).
         encoding: "compact" or "exact" (version 1 files are "exact").
     """
 
@@ -103,7 +108,7 @@ def write_texture_file(
     bits: Bits = DEFAULT_BITS,
 ) -> Path:
     """Write ``arrays`` (every name of :data:`ARRAYS`) with the voxel size and
-    the JSON-representable part of ``meta``, atomically, as format version 5
+    the JSON-representable part of ``meta``, atomically, as format version 6
     in ``encoding`` ("compact", quantised with ``bits``, or "exact"), streamed
     into the file. The texture is encoded before the file is touched, so a
     texture that cannot be encoded leaves no file behind."""
@@ -194,7 +199,8 @@ def read_texture_file(path: str | os.PathLike) -> TextureFile:
                 )
             if not isinstance(params, dict):
                 raise FormatError(f"'{p}' has a damaged header: params is not an object; {REBUILD}")
-        names = (ARRAYS if version >= 4 else ARRAYS_V3) if encoding == "exact" else _compact_members(params, version)
+        exact = ARRAYS if version >= 6 else ARRAYS_V5 if version >= 4 else ARRAYS_V3
+        names = exact if encoding == "exact" else _compact_members(params, version)
         members = {}
         for n in names:
             try:
@@ -224,6 +230,8 @@ def read_texture_file(path: str | os.PathLike) -> TextureFile:
         arrays = dict(members)
         if "entry_cover" not in arrays:  # files before version 4: every facet covers
             arrays["entry_cover"] = np.ones(len(arrays["entry_direction"]), dtype=np.float32)
+        if "entry_side" not in arrays:  # files before version 6: every entry two-sided
+            arrays["entry_side"] = np.zeros(len(arrays["entry_direction"]), dtype=np.int8)
     return TextureFile(arrays, float(voxel_size), meta, version, encoding)
 
 
@@ -233,7 +241,7 @@ def _compact_members(params: dict, version: int) -> tuple[str, ...]:
     when its residual is stored."""
     bits = params.get("bits")
     stored = not isinstance(bits, dict) or bits.get("density", 1) != 0
-    names = MEMBERS if version >= 4 else MEMBERS_V3 if version >= 3 else MEMBERS_V2
+    names = MEMBERS if version >= 6 else MEMBERS_V5 if version >= 4 else MEMBERS_V3 if version >= 3 else MEMBERS_V2
     return tuple(n for n in names if n != "density" or stored)
 
 
