@@ -255,7 +255,7 @@ def test_a_thin_beams_alpha_across_it_is_its_width(view):
 def test_backs_read_the_closed_sums():
     """``closed_sign``: +-1 / cover where an entry lies wholly on a closed
     surface (the sign: its mean normal points out of it), 0 on open
-    surfaces and for a texture loaded without closed sums; ``back_terms``
+    surfaces; from the stored sides without closed sums; ``back_terms``
     hides the closed entries facing away from the eye and takes ``max(0,
     V . w)`` from the density (the voxel's closed vector area along w)."""
     beam, _ = thin_beam()
@@ -266,8 +266,13 @@ def test_backs_read_the_closed_sums():
     np.testing.assert_allclose(closed_sign(build_texture(inward, 32, 16, bounds=BEAM_BOUNDS)), -sigma, rtol=2e-3)
     quad = scenes.quad(1.0)
     assert not closed_sign(build_texture(quad, 8, 16)).any()
-    loaded = AnisoTexture(**{**vars(tex), "entry_closed_area": None, "entry_closed_normal": None})
-    assert not closed_sign(loaded).any()
+    # Without closed sums (a texture from a file), sigma comes from the sides
+    # files keep since version 6 and the covers; a file before that has no
+    # sides (0): nothing hidden.
+    sums = {"entry_closed_area": None, "entry_closed_normal": None}
+    np.testing.assert_allclose(closed_sign(AnisoTexture(**{**vars(tex), **sums})), sigma, rtol=2e-3)
+    old_file = AnisoTexture(**{**vars(tex), **sums, "entry_side": np.zeros(tex.n_entries, np.int8)})
+    assert not closed_sign(old_file).any()
     w = np.array([0.3, -0.4, -1.0]) / np.linalg.norm([0.3, -0.4, -1.0])
     rows = np.arange(tex.n_entries)
     vis, back = back_terms(tex, rows, tex.entry_voxel, tex.n_voxels, w, 0.75)
@@ -276,6 +281,16 @@ def test_backs_read_the_closed_sums():
     np.testing.assert_array_equal(vis[~away], 1.0)
     _, net = voxel_net(tex.entry_offsets, tex.entry_closed_normal)
     np.testing.assert_allclose(back, 0.75 * np.maximum(net @ w, 0.0), rtol=2e-3, atol=1e-6)
+
+
+def test_a_file_keeps_what_hides_the_backs(tmp_path):
+    """A texture read from its file (format version 6: each entry's side)
+    hides its closed backs as the texture as built does."""
+    beam, _ = thin_beam()
+    tex = build_texture(beam, 32, 16, bounds=BEAM_BOUNDS)
+    loaded = AnisoTexture.load(tex.save(tmp_path / "beam.a3d"))
+    assert loaded.entry_closed_normal is None
+    np.testing.assert_allclose(closed_sign(loaded), closed_sign(tex), atol=0.02)
 
 
 @pytest.mark.gpu

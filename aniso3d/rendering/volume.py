@@ -542,12 +542,18 @@ def closed_sign(texture: AnisoTexture, rows: np.ndarray | slice = slice(None)) -
     (``entry_closed_normal``), is about ``sigma`` times its covered area
     (:func:`covered_area`) times its mean normal n (exactly, for an entry
     wholly on closed surfaces: ``sigma = +-1 / cover``, the sign of the
-    winding): ``(V_e . n) / (A_cov |n|^2)``, in [-2, 2]. 0 for open entries and
-    for every entry of a texture loaded from a file (which keeps no closed
-    sums). Read by the "planar" law (:data:`BACK_HIDE`)."""
+    winding): ``(V_e . n) / (A_cov |n|^2)``, in [-2, 2]. 0 for open entries. A
+    texture loaded from a file keeps no closed sums, but (format version 6)
+    each entry's side: ``side / cover`` for the entries wholly on closed
+    surfaces (0 for those partly on one, and in older files). Read by the
+    "planar" law (:data:`BACK_HIDE`)."""
     n = np.asarray(texture.entry_normal, np.float64)[rows]
     if texture.entry_closed_normal is None:
-        return np.zeros(len(n))
+        side = np.zeros(len(n)) if texture.entry_side is None else np.asarray(texture.entry_side, np.float64)[rows]
+        cover = np.asarray(texture.entry_cover, np.float64)[rows]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sig = np.where(cover > 0, side / cover, 0.0)
+        return np.clip(sig, -2.0, 2.0).astype(np.float16).astype(np.float64)
     den = covered_area(texture, rows) * np.einsum("ij,ij->i", n, n)
     num = np.einsum("ij,ij->i", np.asarray(texture.entry_closed_normal, np.float64)[rows], n)
     with np.errstate(divide="ignore", invalid="ignore"):
