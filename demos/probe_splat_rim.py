@@ -57,20 +57,13 @@ def main() -> None:
             params.AA_SURFACE_REACH = reach
             frags = twin.subpixel_fragments_np(pts, view, opts)
             _, alpha = twin.composite_np(frags)
-            lo, scale, span = frags.slicing
+            span = frags.slicing[2]
             n = SIZE[0] * SIZE[1]
-            s = np.clip(np.floor((frags.depth - lo) * scale), 0, params.AA_SLICES - 1).astype(np.int64)
-            first_end = None
-            if frags.reach is not None:
-                least = np.full(n, np.inf)
-                np.minimum.at(least, frags.pixel, frags.reach)
-                with np.errstate(invalid="ignore"):
-                    first_end = np.floor((least - lo) * scale) + span
-            _, count = twin.surfaces_np(frags.pixel, s, n, span, first_end)
+            keep, s, _, count = twin.fragment_surfaces(frags)
             count = count.reshape(SIZE[1], SIZE[0])
             lo_s, hi_s = np.full(n, np.inf), np.full(n, -np.inf)
-            np.minimum.at(lo_s, frags.pixel, s)
-            np.maximum.at(hi_s, frags.pixel, s)
+            np.minimum.at(lo_s, frags.pixel[keep], s)
+            np.maximum.at(hi_s, frags.pixel[keep], s)
             spread = (hi_s - lo_s).reshape(SIZE[1], SIZE[0])
             counted = frags.coverage * (1.0 if frags.counts is None else frags.counts)
             cover = np.bincount(frags.pixel, counted, n).reshape(SIZE[1], SIZE[0])

@@ -388,6 +388,27 @@ def closed_np(own: np.ndarray, start: np.ndarray, span: float, sided: np.ndarray
     return (own < 1.0) & (total >= 5.0 * min_mean)
 
 
+def fragment_surfaces(frags: Fragments) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The surfaces of each pixel of ``frags`` (rule steps 1 to 3): (keep,
+    slice, starts, count), ``keep`` (F,) bool the fragments kept (coverage at
+    least :data:`MIN_COVERAGE`), ``slice`` (K,) int64 the kept ones' slices,
+    and :func:`surfaces_np`'s ``starts`` and ``count`` per pixel, the nearest
+    surface spanning from its fragments' least reach where that lies farther."""
+    w, h = frags.size
+    lo, scale, span = frags.slicing
+    keep = frags.coverage >= MIN_COVERAGE
+    pixel = frags.pixel[keep]
+    s = np.clip(np.floor((frags.depth[keep] - lo) * scale), 0, AA_SLICES - 1).astype(np.int64)
+    first_end = None
+    if frags.reach is not None:
+        least = np.full(w * h, np.inf)
+        np.minimum.at(least, pixel, np.asarray(frags.reach, np.float64)[keep])
+        with np.errstate(invalid="ignore"):
+            first_end = np.floor((least - lo) * scale) + span
+    starts, count = surfaces_np(pixel, s, w * h, span, first_end)
+    return keep, s, starts, count
+
+
 def composite_np(
     frags: Fragments, background=(1.0, 1.0, 1.0), layers: int = AA_LAYERS, last_weights: bool | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -400,19 +421,11 @@ def composite_np(
     if last_weights is None:
         last_weights = params.AA_LAST_WEIGHTS
     w, h = frags.size
-    lo, scale, span = frags.slicing
-    keep = frags.coverage >= MIN_COVERAGE
+    span = frags.slicing[2]
+    keep, s, starts, count = fragment_surfaces(frags)
     pixel, c, rgb = frags.pixel[keep], frags.coverage[keep], frags.rgb[keep]
     counted = c if frags.counts is None else c * np.asarray(frags.counts, dtype=np.float64)[keep]
     cover_sum = np.bincount(pixel, counted, w * h)
-    s = np.clip(np.floor((frags.depth[keep] - lo) * scale), 0, AA_SLICES - 1).astype(np.int64)
-    first_end = None
-    if frags.reach is not None:
-        least = np.full(w * h, np.inf)
-        np.minimum.at(least, pixel, np.asarray(frags.reach, np.float64)[keep])
-        with np.errstate(invalid="ignore"):
-            first_end = np.floor((least - lo) * scale) + span
-    starts, count = surfaces_np(pixel, s, w * h, span, first_end)
     surface = (starts[pixel] <= s[:, None]).sum(axis=1) - 1
     layer = np.minimum(surface, layers - 1)
     total = np.zeros((w * h, layers))
