@@ -25,6 +25,7 @@ With ``--halfplanes off`` the volume draws no half-planes
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import numpy as np
 from scipy import ndimage
@@ -33,6 +34,7 @@ from aniso3d import metrics
 from aniso3d.bench.corpus import corpus_cameras
 from aniso3d.bench.settings import BASELINE
 from aniso3d.build import scenes
+from aniso3d.build.mesh import load_mesh
 from aniso3d.build.texture import build_texture
 from aniso3d.rendering import sheet_halfplanes
 from aniso3d.rendering.context import GLContext
@@ -76,7 +78,7 @@ def main() -> None:
     with GLContext("auto") as gl, Renderer(size, gl=gl) as r:
         bg = 255.0 * np.asarray(r.lighting.background, dtype=np.float64)
         for name in args.scenes:
-            mesh = scenes.get_scene(name)
+            mesh = load_mesh(name) if Path(name).suffix else scenes.get_scene(name)
             tex = build_texture(mesh, args.resolution, args.directions)
             points = tex.to_points(BASELINE["placement"], BASELINE["per_entry"], BASELINE["point_normal"])
             for spec in corpus_cameras(mesh, size, args.resolution):

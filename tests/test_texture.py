@@ -82,7 +82,13 @@ def square(axis, offset, lo, hi, flip=False, **material):
 
 
 @pytest.mark.parametrize("resolution", [12, 40])
-def test_density_conservation_on_the_tree(resolution):
+def test_density_conservation_on_the_tree(resolution, monkeypatch):
+    # The registration's sums, with no face taken as closed: the branches
+    # (tubes open at small ends) are closed skins whose backs a voxel hides
+    # (tests/test_thin_solids.py measures that part).
+    import aniso3d.build.mesh_stream as mesh_stream
+
+    monkeypatch.setattr(mesh_stream, "face_topology", lambda v, f: (np.zeros(len(f), np.int8), np.zeros(len(f), bool)))
     mesh = small_tree()
     tex = build_texture(mesh, resolution, 32)
     assert_density_conserved(tex, mesh)

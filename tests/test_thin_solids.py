@@ -55,6 +55,13 @@ def test_closed_faces_of_small_meshes():
     shifted[0, 3] = 3.0
     both = concatenate([cube, inward.transformed(shifted), quad.transformed(-shifted)])
     np.testing.assert_array_equal(both.closed_sides(), [1] * 12 + [-1] * 12 + [0] * quad.n_faces)
+    # a sphere with a small hole (one triangle of 5120 missing) is a closed
+    # skin with a hole; a bowl (its lower half) is open
+    sphere = scenes.sphere()
+    np.testing.assert_array_equal(Mesh.from_arrays(sphere.vertices, sphere.faces[1:]).closed_sides(), 1)
+    z = sphere.triangles[:, :, 2].mean(axis=1)
+    bowl = Mesh.from_arrays(sphere.vertices, sphere.faces[z < np.median(z)])
+    assert not bowl.closed_faces().any()
     # a tube open at both ends (a cube without its top and bottom) is open
     z = cube.vertices[cube.faces][:, :, 2]
     tube = Mesh.from_arrays(cube.vertices, cube.faces[~np.all(z == z[:, :1], axis=1)])

@@ -29,6 +29,13 @@ DEFAULT_SHININESS = 16.0
 #: its topology is read (:func:`face_topology`): float noise of exporters is
 #: far below it, any detail a texture resolves far above.
 MERGE_SHARE = 2.0**-20
+#: A consistently wound surface is taken as closed while its holes are small:
+#: the squared length of its open edges at most this share of its area (0:
+#: watertight only). A sphere with a hole of 23 degrees' radius (4 % of its
+#: area) or a head with open eye sockets passes; a bowl (pi), a box without
+#: its lid (3.2), a leaf (16) or a tube open at both ends shorter than 50
+#: times its radius (8 pi r / length) does not.
+HOLE_SHARE = 0.5
 #: Largest Phong exponent accepted; higher ones are clamped (a mirror-like lobe
 #: narrower than this is below a pixel at any size we render).
 MAX_SHININESS = 1.0e4
@@ -482,10 +489,12 @@ def face_topology(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, 
     polygons' depth test keeps one). Repeats and degenerate faces (a
     repeated corner) take no part in the topology and are open.
 
-    A closed surface is a component of the other faces, joined by shared
-    edges, in which every edge is shared by exactly two faces walking it
-    opposite ways: a watertight, consistently wound skin. Its orientation is
-    the sign of its signed volume; components enclosing no volume are open."""
+    A closed surface is a component of the other faces, joined by edges
+    that two faces walk opposite ways (a consistently wound skin), whose
+    holes are small (:data:`HOLE_SHARE`: scans and modelled heads have a few;
+    only its faces beside an edge shared by three faces or more, or walked
+    the same way twice, are open). Its orientation is the sign of its signed
+    volume; components enclosing no volume are open."""
     faces = np.asarray(faces, dtype=np.int64)
     nf = len(faces)
     sides = np.zeros(nf, dtype=np.int8)
@@ -519,21 +528,30 @@ def _closed_components(v: np.ndarray, faces: np.ndarray, f: np.ndarray) -> np.nd
     # +1 walked low to high, -1 back: an edge shared the other way sums to 0.
     walk = np.bincount(inverse, weights=np.where(a < b, 1.0, -1.0), minlength=len(count))
     good = (count == 2) & (walk == 0)
-    local = good[inverse].reshape(-1, 3).all(axis=1)
-    # Components: faces joined by edges that two faces share.
+    # A face beside an edge shared by more than two faces, or walked the
+    # same way by both, is open: it may be wound against its neighbours.
+    local = (good | (count == 1))[inverse].reshape(-1, 3).all(axis=1)
+    # Components: faces joined by edges that two faces walk opposite ways.
     order = np.argsort(inverse, kind="stable")
     first = np.concatenate([[0], np.cumsum(count)[:-1]])
-    pair = first[count == 2]
+    pair = first[good]
     u, w = order[pair] // 3, order[pair + 1] // 3
     root = connected_components(nf, u, w)
-    # A component is closed when every face of it is.
-    open_count = np.bincount(root, weights=(~local).astype(np.float64), minlength=nf)
+    # The length of a component's holes: its edges that are not shared
+    # with a neighbour walking them the other way.
+    corner = v[faces.reshape(-1)]
+    length = np.linalg.norm(v[faces[:, [1, 2, 0]].reshape(-1)] - corner, axis=1)
+    hole = np.bincount(root[np.arange(len(a)) // 3], weights=np.where(good[inverse], 0.0, length), minlength=nf)
+    t = v[faces]
+    area = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+    skin = np.bincount(root, weights=area, minlength=nf)
+    closed = hole**2 <= HOLE_SHARE * skin
     p0, p1, p2 = (v[faces[:, k]] - v.mean(axis=0) for k in range(3))
     volume = np.bincount(root, weights=np.einsum("ij,ij->i", p0, np.cross(p1, p2)), minlength=nf)
     extent = float(np.ptp(v, axis=0).max()) if len(v) else 0.0
     tiny = 1e-12 * extent**3
     sign = np.where(volume > tiny, 1, np.where(volume < -tiny, -1, 0))
-    return np.where(open_count[root] == 0, sign[root], 0).astype(np.int8)
+    return np.where(local & closed[root], sign[root], 0).astype(np.int8)
 
 
 def connected_components(n: int, u: np.ndarray, w: np.ndarray) -> np.ndarray:
