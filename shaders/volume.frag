@@ -329,11 +329,10 @@ float edge_angle(uint code) {
     return float(code) * (6.283185307179586 / 256.0) - 3.141592653589793;
 }
 
-// Share of the pixel's footprint on the covered side of a half-plane's
-// line (entry word 11 `w`: bits 11-18 the angle theta of its inward normal
-// u in the tangent frame of nh, bits 19-30 its offset c) where the ray
-// crosses the sheet's plane nh.x = d at p: (p - q0).u - c from the line in
-// the plane (q0 the plane's point nearest the voxel's centre), times
+// Share of the pixel's footprint on the covered side of a line (its inward
+// normal u at angle theta in the tangent frame of nh, offset c) where the
+// ray crosses the sheet's plane nh.x = d at p: (p - q0).u - c from the line
+// in the plane (q0 the plane's point nearest the voxel's centre), times
 // |n.w| / sqrt(1 - (t.w)^2) seen along the ray (t = n x u): a ramp over the
 // footprint, 1/2 on the line. Mirrors render/sheet_halfplanes.py:halfplane_ramp.
 float line_ramp(float theta, float c, vec3 p, vec3 nh, float nw, float d, float foot) {
@@ -346,6 +345,8 @@ float line_ramp(float theta, float c, vec3 p, vec3 nh, float nw, float d, float 
     return clamp(0.5 + dist / max(foot, 1e-12), 0.0, 1.0);
 }
 
+// The same for a half-plane's line (entry word 11 `w`: bits 11-18 theta,
+// bits 19-30 c).
 float halfplane_ramp(uint w, vec3 p, vec3 nh, float nw, float d, float foot) {
     float c = (float((w >> 19u) & 4095u) / 4095.0 * 2.0 - 1.0) * HALF_C_RANGE;
     return line_ramp(edge_angle((w >> 11u) & 255u), c, p, nh, nw, d, foot);

@@ -17,13 +17,18 @@ one whose strip's centroid comes nearest the facets' is kept; the strip's
 two offsets are found by Newton steps on its area and first moment across
 the lines (their derivatives are the chords' lengths).
 
+The half-planes of closed entries are taken as strips of one line (the far
+one at infinity): on a closed surface the footprint's share past the line
+is the neighbouring face's, and they are drawn at the strips' scales.
+
 The renderer counts a strip as the share of the pixel's footprint between
 its lines where the ray crosses its plane (:func:`strip_cover`: the
 difference of two half-planes' ramps), in the voxel's own sheet sum, as it
-does a half-plane's. Lines are kept as the half-planes' are: the inward
-normal u's angle in the sheet's tangent frame and the near line's offset in
-entry word 11, the far line's offset in word 12 (which only surface sheets,
-never strips, use otherwise).
+does a half-plane's, where the voxel spans :data:`STRIP_PIXELS` or more.
+Lines are kept as the half-planes' are: the inward normal u's angle in the
+sheet's tangent frame and the near line's offset in entry word 11 (bit
+:data:`STRIP_BIT` set), the far line's offset in word 12 as float32 (which
+only surface sheets, never strips, use otherwise).
 """
 
 from __future__ import annotations
@@ -252,8 +257,9 @@ def strip_cover(angle, lo, hi, plane, point, normal, w, foot) -> np.ndarray:
     the strips' lines (``angle``, ``lo``, ``hi`` (N,)) where the ray (unit
     ``w``) crosses their planes (unit ``normal`` (N, 3), ``normal . x =
     plane``) at the voxel-local ``point`` (N, 3): the ramp of the near line
-    less that of the far one (:func:`~aniso3d.rendering.sheet_halfplanes.halfplane_ramp`:
-    a box footprint across the projected lines). Mirrors strip_cover() in
+    less that of the far one (``hi`` infinite: none, a half-plane), each
+    :func:`~aniso3d.rendering.sheet_halfplanes.halfplane_ramp` (a box
+    footprint across the projected lines). Mirrors strip_cover() in
     volume.frag."""
     near = halfplane_ramp(angle, lo, plane, point, normal, w, foot)
     hi = np.asarray(hi, dtype=np.float64).reshape(-1)

@@ -1304,7 +1304,8 @@ def pack_volume(texture: AnisoTexture) -> dict[str, np.ndarray]:
     pairs in uint32), ``entries`` (:data:`ENTRY_WORDS` uint32 per entry: the
     shading entry and its sheet, :func:`entry_sheets`, with its edges and
     after its voxel's entries the halos there, :func:`sheet_edges`; or its
-    half-plane, :func:`~aniso3d.rendering.sheet_halfplanes.sheet_halfplanes`) and
+    half-plane, :func:`~aniso3d.rendering.sheet_halfplanes.sheet_halfplanes`,
+    or strip, :func:`~aniso3d.rendering.sheet_strips.sheet_strips`) and
     ``directions``, over the GPU grid (:func:`pack_volume_grid`). CPU only;
     checks the texture holds finite numbers."""
     return pack_volume_grid(texture).arrays
