@@ -23,7 +23,7 @@ from aniso3d.build.texture import build_texture
 from aniso3d.grid import tangent_frame
 from aniso3d.rendering.camera import Camera
 from aniso3d.rendering.lighting import Lighting
-from aniso3d.rendering.sheet_halfplanes import _clipped, section_polygons
+from aniso3d.rendering.sheet_halfplanes import clipped_piece, section_polygons
 from aniso3d.rendering.sheet_strips import STRIP_TOLERANCE, SheetStrips, fit_strips, strip_cover
 from aniso3d.rendering.volume import march_ray_np, sheet_layout
 
@@ -46,8 +46,8 @@ def test_fit_recovers_a_strip():
     a, b = np.sort(rng.uniform(0.1, 0.9, (N, 2)), axis=1).T
     b = np.maximum(b, a + 0.1)
     lo, hi = lo_s + (hi_s - lo_s) * a, lo_s + (hi_s - lo_s) * b
-    a1, c1, _ = _clipped(uv[..., 0], uv[..., 1], u, lo)
-    a2, c2, _ = _clipped(uv[..., 0], uv[..., 1], u, hi)
+    a1, c1, _ = clipped_piece(uv[..., 0], uv[..., 1], u, lo)
+    a2, c2, _ = clipped_piece(uv[..., 0], uv[..., 1], u, hi)
     area = a1 - a2
     cent = (a1[:, None] * c1 - a2[:, None] * c2) / area[:, None]
     q0 = 0.5 - (n.sum(1) * 0.5 - d)[:, None] * n
@@ -108,7 +108,7 @@ def test_a_beams_faces_read_as_strips_along_its_edges(yaw, pitch):
     across = np.where((np.abs(n @ rot[:, 1]) > 0.9)[:, None], rot[:, 2], rot[:, 1])
     off = []
     for c in (st.lo[rows], st.hi[rows]):
-        _, _, chord = _clipped(uv[..., 0], uv[..., 1], u2, c)
+        _, _, chord = clipped_piece(uv[..., 0], uv[..., 1], u2, c)
         on_line = (q0 + c[:, None] * u + tex.coords[tex.entry_voxel[rows]]) * tex.voxel_size + tex.origin
         dist = np.abs(np.abs(np.einsum("nk,nk->n", on_line, across)) - W / 2)
         off.append(dist[chord > 0.05])

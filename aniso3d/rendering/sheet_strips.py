@@ -41,8 +41,8 @@ from aniso3d.rendering.sheet_halfplanes import (
     HALF_COHERENCE,
     HALF_FILL,
     SheetHalfplanes,
-    _clipped,
     angle_code,
+    clipped_piece,
     decoded_offset,
     halfplane_ramp,
     offset_code,
@@ -134,17 +134,17 @@ def fit_strips(normal, offset, area, centroid, axis) -> tuple[np.ndarray, ...]:
     g = np.einsum("nk,nk->n", target, u)
     s = x * u[:, 0:1] + y * u[:, 1:2]
     smin, smax = s.min(axis=1), s.max(axis=1)
-    section, _, _ = _clipped(x, y, u, np.full(N, -1e9))
+    section, _, _ = clipped_piece(x, y, u, np.full(N, -1e9))
     want = np.minimum(np.asarray(area, np.float64).reshape(-1), section)
     g = np.clip(g, smin, smax)
-    _, _, chord = _clipped(x, y, u, g)
+    _, _, chord = clipped_piece(x, y, u, g)
     width = want / np.maximum(chord, 1e-3)
     lo = np.clip(g - 0.5 * width, smin, smax)
     hi = np.clip(g + 0.5 * width, lo, smax)
 
     def strip(lo, hi):
-        a1, c1, l1 = _clipped(x, y, u, lo)
-        a2, c2, l2 = _clipped(x, y, u, hi)
+        a1, c1, l1 = clipped_piece(x, y, u, lo)
+        a2, c2, l2 = clipped_piece(x, y, u, hi)
         return a1 - a2, a1[:, None] * c1 - a2[:, None] * c2, l1, l2
 
     for _ in range(_STEPS):
