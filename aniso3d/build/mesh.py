@@ -464,15 +464,19 @@ def repeated_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 def merged_vertices(vertices: np.ndarray) -> np.ndarray:
     """(V,) int64: one id per position, vertices within :data:`MERGE_SHARE`
-    of the mesh's extent of each other sharing it (rounded to that grid)."""
+    of the mesh's extent of each other sharing it (rounded to that grid; a
+    share of 0: equal positions only)."""
     v = np.asarray(vertices, dtype=np.float64)
     if len(v) == 0:
         return np.zeros(0, dtype=np.int64)
     lo = v.min(axis=0)
     step = float(np.ptp(v, axis=0).max()) * MERGE_SHARE
-    if not step > 0.0:
+    if MERGE_SHARE <= 0.0:
+        _, same = np.unique(v, axis=0, return_inverse=True)
+    elif not step > 0.0:  # every vertex at one point
         return np.zeros(len(v), dtype=np.int64)
-    _, same = np.unique(np.round((v - lo) / step).astype(np.int64), axis=0, return_inverse=True)
+    else:
+        _, same = np.unique(np.round((v - lo) / step).astype(np.int64), axis=0, return_inverse=True)
     return same.reshape(-1).astype(np.int64)
 
 
