@@ -94,6 +94,31 @@ AA_PLANE_REACH = 2.0
 #: apart; two-sided splats (leaves, open sheets) keep the span alone. 0: the
 #: span alone everywhere.
 AA_SURFACE_REACH = 1.0
+#: Whether two-sided splats of surface sheets (:attr:`~aniso3d.build.points.PointCloud.sheet`:
+#: their entry fills its plane's section of the voxel, a surface that goes on,
+#: not a leaf inside it) reach as closed surfaces' do (AA_SURFACE_REACH),
+#: where they graze the ray (AA_SHEET_GRAZE) and chained (AA_SHEET_CHAIN). An
+#: open sheet seen at a grazing angle along a fold (the corpus shell) changes
+#: depth as fast as a closed surface's rim, its fragments split into surfaces
+#: that composed as independent layers, and the background showed through
+#: the folds as light lines. Leaves and blades in a voxel are not sheets:
+#: letting every two-sided splat of coherent normals reach cost the tree and
+#: the grass minified.
+AA_SHEET_REACH = True
+#: A two-sided sheet's fragment reaches only where its depth changes across
+#: AA_SURFACE_REACH pixels by at least this many spans (a grazing sheet):
+#: a sheet nearer to facing the eye lies within its span, and reaching by
+#: less only took in what lies just behind (a wall behind a headboard, a
+#: floor behind the room's front wall at its edge). Measured with the twin
+#: (docs/splat_aa.md): 2 and 3 alike on the shell, 3 kept the room whole.
+AA_SHEET_GRAZE = 3.0
+#: Where a pixel holds no closed surface seen from outside, its nearest
+#: surface reaches as far as its slices are chained: each taken slice takes
+#: those less than this many spans beyond it, up to the reach. Without the
+#: chain, a grazing bed top's reach took in the headboard behind its edge;
+#: a closed surface's rim keeps the reach whole (chained, the blob's rim
+#: split again: -2.5 dB in the twin).
+AA_SHEET_CHAIN = 1.5
 #: A splat whose true projected area is below AA_REGIME[0]^2 pixels is drawn as
 #: a filtered box of its true area; above AA_REGIME[1]^2, as its exact shape
 #: with the size factor (which closes the gaps between resolved splats); a
