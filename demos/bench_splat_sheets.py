@@ -17,9 +17,11 @@ Per scene and camera: PSNR (dB) / FLIP against 8x8 polygons in the object's
 box, as the corpus bench measures, for 1-spp and 2x2 polygons and the
 variants (the points as the renderer makes them, ``texture_points``):
 ``before``: no sheet reaches (``AA_SHEET_REACH`` off); ``sheets``: the
-defaults. Cameras: close, minified and, with ``--auto``, close-auto (the
-close camera, the texture at the resolution ``--resolution auto`` picks
-there, as the corpus bench). The images are deterministic: no spread to
+defaults; ``graze 2``, ``chain 2``, ``chain 1``: ``AA_SHEET_GRAZE`` or
+``AA_SHEET_CHAIN`` changed from the defaults (3 and 1.5 spans). Cameras:
+close, minified and, with ``--auto``, close-auto (the close camera, the
+texture at the resolution ``--resolution auto`` picks there, as the corpus
+bench). The images are deterministic: no spread to
 report. ``--frames N`` also times N frames of each variant (alternating,
 after a warm-up) at the close and minified cameras and gives the median
 and spread of each, with the machine's load.
@@ -51,9 +53,12 @@ from aniso3d.rendering.splat.clips import texture_points
 
 BEGIN = "<!-- bench_splat_sheets: begin -->"
 END = "<!-- bench_splat_sheets: end -->"
-#: Column: the parameters set for it (the rest as they are).
+#: Column: the parameters set for it (the rest as they are): ``before`` no
+#: sheet reaches; ``sheets`` the defaults; the others one value changed.
 VARIANTS = {"before": {"AA_SHEET_REACH": False}, "sheets": {}, "graze 2": {"AA_SHEET_GRAZE": 2.0},
             "chain 2": {"AA_SHEET_CHAIN": 2.0}, "chain 1": {"AA_SHEET_CHAIN": 1.0}}  # fmt: skip
+#: The variants timed with ``--frames``.
+TIMED = ("before", "sheets")
 
 
 def points_of(mesh, resolution: int, directions: int):
@@ -98,12 +103,12 @@ def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
             m = metrics.compare_in_box(truth, img, spec.crop, with_flip=True)
             row[label] = (m["psnr"], m["flip"])
         if args.frames and spec.label != AUTO_CAMERA:
-            times = {label: [] for label in VARIANTS}
-            for variant in VARIANTS.values():
-                draw(renderer, pts, spec, variant)  # warm-up (programs compiled)
+            times = {label: [] for label in TIMED}
+            for label in TIMED:
+                draw(renderer, pts, spec, VARIANTS[label])  # warm-up (programs compiled)
             for _ in range(args.frames):
-                for label, variant in VARIANTS.items():
-                    times[label].append(1000.0 * draw(renderer, pts, spec, variant)[1])
+                for label in TIMED:
+                    times[label].append(1000.0 * draw(renderer, pts, spec, VARIANTS[label])[1])
             row["ms"] = {k: (float(np.median(v)), float(min(v)), float(max(v))) for k, v in times.items()}
         rows.append(row)
         print(f"  {spec.label}: " + ", ".join(f"{k} {v[0]:.2f}/{v[1]:.4f}" for k, v in row.items()
@@ -144,7 +149,9 @@ def main() -> None:
         f"corpus bench's points (`texture_points`) and {BASELINE['splat']} splats, quality \"high\"; truth "
         f"{args.gt_ssaa}x{args.gt_ssaa} polygons; PSNR (dB) / FLIP inside the object's box, as the corpus bench. "
         "Sheets: the share of points on surface sheets. before: no sheet reaches (AA_SHEET_REACH off); sheets: "
-        "the defaults. Δ: sheets - before. ≥ 2x2, ≥ 1 spp: sheets at least as good in PSNR and FLIP.",
+        f"the defaults (AA_SHEET_GRAZE {params.AA_SHEET_GRAZE:g}, AA_SHEET_CHAIN {params.AA_SHEET_CHAIN:g} spans); "
+        "graze 2, chain 2, chain 1: one value changed. Δ: sheets - before. ≥ 2x2, ≥ 1 spp: sheets at least as good "
+        "in PSNR and FLIP.",
         "",
         markdown_table(["scene", "camera", "sheets", *columns, "Δ PSNR", "Δ FLIP", "≥ 2x2", "≥ 1 spp"], table),
     ]
@@ -152,13 +159,13 @@ def main() -> None:
     if timed:
         parts += [
             "",
-            f"Frame time, ms: median [fastest-slowest] of {args.frames} frames of each variant, alternating, "
+            f"Frame time, ms: median [fastest-slowest] of {args.frames} frames of before and sheets, alternating, "
             "after a warm-up (`Renderer.render`, draw and read back; wall clock on a shared machine, "
             f"{os.cpu_count()} CPUs, load as above).",
             "",
-            markdown_table(["scene", "camera", *VARIANTS, "sheets / before"],
+            markdown_table(["scene", "camera", *TIMED, "sheets / before"],
                            [[r["scene"], r["camera"], *(f"{r['ms'][k][0]:.0f} [{r['ms'][k][1]:.0f}-{r['ms'][k][2]:.0f}]"
-                                                        for k in VARIANTS),
+                                                        for k in TIMED),
                              f"{r['ms']['sheets'][0] / r['ms']['before'][0]:.3f}"] for r in timed]),
         ]  # fmt: skip
     parts.append(END)
