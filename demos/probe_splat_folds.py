@@ -9,11 +9,11 @@ those only). For the pixels inside the polygons' outline whose alpha falls
 below 0.98, and for the rest, it prints how many surfaces the pixel holds,
 the spread of its fragments' depth slices against the span, its coverage
 sum, and how much of that sum its nearest surface holds; first with no
-sheet reaching (``AA_SHEET_REACH`` off), then with the defaults. The
-pixels that still leak mostly hold a few fragments of tiny coverage in
-front of the grazing sheet (the near edge of another splat's box): they
-make the nearest surface, and the grazing body behind, which does not
-reach, splits.
+sheet reaching (``AA_SHEET_REACH`` off), then with the defaults. Of the
+pixels that still leak, those of one surface are short of coverage (the
+splats' tiling); of the others, some hold a few fragments of tiny coverage
+in front of the grazing sheet, which make the nearest surface (the share
+below 0.05), and the grazing sheet behind, which does not reach, splits.
 
     .venv/bin/python demos/probe_splat_folds.py [--scene shell] [--back 1.35]
 """

@@ -22,7 +22,16 @@ fraction of the pixel a splat covers; linear depth z; colour):
    across :data:`~aniso3d.rendering.splat.params.AA_SURFACE_REACH` pixels
    where the pixel's ray meets its plane (at most its bounding sphere's
    depth), so that a closed surface nearly along the ray, whose fragments
-   lie at scattered depths, stays one.
+   lie at scattered depths, stays one; the same for a two-sided splat of a
+   surface sheet (:attr:`~aniso3d.build.points.PointCloud.sheet`, with
+   :data:`~aniso3d.rendering.splat.params.AA_SHEET_REACH`) where that
+   change is at least :data:`~aniso3d.rendering.splat.params.AA_SHEET_GRAZE`
+   spans (a sheet grazing the ray). Where the pixel holds no one-sided
+   splat drawn with its back culled, the nearest surface takes beyond its
+   span only the slices chained to it, each less than
+   :data:`~aniso3d.rendering.splat.params.AA_SHEET_CHAIN` spans beyond the
+   one before (a fold's fragments lie slice after slice; a sheet behind a
+   grazing one's edge lies apart).
 4. Layer k holds surface k, for k < :data:`~aniso3d.rendering.splat.params.AA_LAYERS` - 1;
    the last layer every surface from there on.
 5. Within a surface splats tile it, so coverages add: a = min(1, sum c); the
