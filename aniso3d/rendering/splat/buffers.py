@@ -124,7 +124,7 @@ def upload_points(gl: GLContext, cloud: PointCloud | LodPoints) -> GPUPoints:
     order = morton_order(cloud.positions - origin)
     arrays = (cloud.positions, uploaded_normals(cloud), cloud.areas, cloud.kd, cloud.ks, cloud.shininess)
     return _upload_arrays(gl, GPUPoints, arrays, order, bounds, origin, one_sided=cloud.one_sided,
-                          clips=cloud.clips)  # fmt: skip
+                          clips=cloud.clips, sheet=cloud.sheet)  # fmt: skip
 
 
 #: Least coherence uploaded: the normal's length carries it, and the splat's
@@ -154,14 +154,15 @@ def clip_attributes(clips: np.ndarray, origin) -> np.ndarray:
 
 
 def _upload_arrays(
-    gl: GLContext, cls, arrays, order, bounds, origin, one_sided=None, clips=None, **extra
+    gl: GLContext, cls, arrays, order, bounds, origin, one_sided=None, clips=None, sheet=None, **extra
 ) -> GPUPoints:
     """Upload the points ``order`` of ``arrays`` (positions, normals,
     areas, kd, ks, shininess), in that order, relative to ``origin``; a
     ``one_sided`` point (:attr:`~aniso3d.build.points.PointCloud.one_sided`)
     gets its size negated (splat.vert culls it where it faces away); ``clips``
     (:attr:`~aniso3d.build.points.PointCloud.clips`, None: none) are moved to
-    the local frame."""
+    the local frame; a ``sheet`` point (:attr:`~aniso3d.build.points.PointCloud.sheet`)
+    gets the sign bit of its ks set (-0.0 for ks 0; splat.vert reads it)."""
     positions, normals, areas, kd, ks, shininess = arrays
     n = len(order)
     rows = -(-n // ATTRIB_PER_ROW)
@@ -177,14 +178,14 @@ def _upload_arrays(
     data[:, 3:6] = normals[order]
     data[:, 6] = size if one_sided is None else np.where(one_sided[order], -size, size)
     data[:, 7:10] = kd[order]
-    data[:, 10] = ks[order]
+    data[:, 10] = ks[order] if sheet is None else np.where(sheet[order], np.copysign(ks[order], -1.0), ks[order])
     data[:, 11] = shininess[order]
     clip_data = None
     if clips is not None:
         clip_data = clip_attributes(clips[order], origin).reshape(n, CLIP_FLOATS_PER_POINT)
     attrib = np.zeros((rows * ATTRIB_PER_ROW, 8), dtype=np.float32)
     attrib[:n, 0:3] = data[:, 3:6]
-    attrib[:n, 3] = data[:, 10]
+    attrib[:n, 3] = ks[order]
     attrib[:n, 4:7] = data[:, 7:10]
     attrib[:n, 7] = data[:, 11]
     ctx = gl.ctx
@@ -251,13 +252,16 @@ def upload_lod(gl: GLContext, lod: LodPoints) -> GPULodPoints:
     one_sided = None
     if any(c.one_sided is not None for c in clouds):
         one_sided = np.concatenate([np.zeros(len(c), bool) if c.one_sided is None else c.one_sided for c in clouds])
+    sheet = None
+    if any(c.sheet is not None for c in clouds):
+        sheet = np.concatenate([np.zeros(len(c), bool) if c.sheet is None else c.sheet for c in clouds])
     clips = None
     if any(c.clips is not None for c in clouds):
         clips = np.concatenate([np.zeros((len(c), 2, 5)) if c.clips is None else c.clips for c in clouds])
     empty = np.full((2, 3), np.nan)
     handle = _upload_arrays(
         gl, GPULodPoints, arrays, np.concatenate(parts), bounds, origin, one_sided=one_sided, clips=clips,
-        lod=lod, level_first=np.asarray(level_first, dtype=np.int64),
+        sheet=sheet, lod=lod, level_first=np.asarray(level_first, dtype=np.int64),
         rank=rank, run_first=run_first, run_count=run_count,
         level_bounds=np.stack([c.bounds if len(c) else empty for c in clouds]),
         level_size=np.array([np.sqrt(c.areas.max()) if len(c) else 0.0 for c in clouds]),
