@@ -8,6 +8,8 @@
 //   in_size = sqrt(area) (world units), negated for a one-sided point (a
 //   piece of a closed surface, its normal pointing out: culled where it faces
 //   away from the eye), in_kd (RGB), in_spec = (ks, shininess).
+//   CLIPS (quality "high" of a cloud with clip planes): each point's two
+//   clip planes, from u_clip_table through u_clip_rank (see clip_inputs()).
 // Out: SplatData (splat_data.glsl; all flat), and
 //   SPRITE path (default): gl_Position at the box centre and a gl_PointSize
 //   covering the box; splats whose box is wider than u_max_sprite, or with
@@ -117,15 +119,40 @@ in float in_size;
 in vec3 in_kd;
 #endif
 in vec2 in_spec;
-#ifdef INSTANCED
-const vec3 in_clip0 = vec3(0.0);  // an instance's points are not cut
-const vec3 in_clip1 = vec3(0.0);
-#else
+#if defined(CLIPS) && !defined(INSTANCED)
 // Two clip planes, each (code, o, phi): the half-space s x_a <= o, code
 // s (a + 1) (0: none), phi the angle of the surface meeting the splat's there
-// (0: none; aniso3d.build.points.PointCloud.clips).
-in vec3 in_clip0;
-in vec3 in_clip1;
+// (0: none; aniso3d.build.points.PointCloud.clips). Few points have them,
+// so they are rows of a table (two texels each), found through a rank index
+// over the points' buffer order (aniso3d.rendering.splat.buffers.CLIP_WORD):
+// per CLIP_WORD points, (bit i set: point i of the word has planes; how many
+// points before the word have); a point's row is that count plus the set
+// bits below its own.
+uniform usampler2D u_clip_rank;
+uniform sampler2D u_clip_table;
+vec3 in_clip0 = vec3(0.0);
+vec3 in_clip1 = vec3(0.0);
+
+uint ones(uint x) {  // set bits of x (bitCount is GLSL 4.00)
+    x = x - ((x >> 1u) & 0x55555555u);
+    x = (x & 0x33333333u) + ((x >> 2u) & 0x33333333u);
+    x = (x + (x >> 4u)) & 0x0F0F0F0Fu;
+    return (x * 0x01010101u) >> 24u;
+}
+
+void clip_inputs() {
+    int word = gl_VertexID / CLIP_WORD;
+    uvec2 rank = texelFetch(u_clip_rank, ivec2(word % CLIP_RANK_PER_ROW, word / CLIP_RANK_PER_ROW), 0).xy;
+    uint bit = 1u << uint(gl_VertexID % CLIP_WORD);
+    if ((rank.x & bit) == 0u) return;
+    int row = int(rank.y + ones(rank.x & (bit - 1u)));
+    ivec2 at = ivec2(2 * (row % CLIP_TABLE_PER_ROW), row / CLIP_TABLE_PER_ROW);
+    in_clip0 = texelFetch(u_clip_table, at, 0).xyz;
+    in_clip1 = texelFetch(u_clip_table, at + ivec2(1, 0), 0).xyz;
+}
+#else
+const vec3 in_clip0 = vec3(0.0);  // no point is cut (an instance's never are)
+const vec3 in_clip1 = vec3(0.0);
 #endif
 
 out SplatData SPLAT_DATA vs_out;
@@ -198,6 +225,8 @@ vec3 cut_line(vec2 c, vec3 t, vec3 b, vec2 h) {
 void main() {
 #ifdef INSTANCED
     instance_inputs();
+#elif defined(CLIPS)
+    clip_inputs();
 #endif
     vec3 n = normalize(in_normal);  // its length is the point's coherence
     vec3 helper = abs(n.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0);

@@ -23,6 +23,7 @@ from aniso3d.rendering.frame import FrameView
 from aniso3d.rendering.lighting import Lighting
 from aniso3d.rendering.renderer import Renderer
 from aniso3d.rendering.splat import SplatOptions
+from aniso3d.rendering.splat.buffers import CLIP_WORD, clip_rank, clip_rows
 from aniso3d.rendering.splat.clips import entry_clips, texture_points
 from aniso3d.rendering.splat.reference import clip_geometry_np, composite_np, rect_kept_np, subpixel_fragments_np
 
@@ -182,6 +183,21 @@ def test_a_cut_subpixel_splat_keeps_its_area_inside_a_surface():
         assert not np.any(left > clips[i, 0, 3] + 1e-9), i
 
 
+def test_clip_rows_count_the_marked_points_before_each():
+    """The rank index finds each marked point's row: the number of marked
+    points before it in buffer order (a cumulative sum, independent of the
+    bit packing); unmarked points get none."""
+    rng = np.random.default_rng(5)
+    for n, share in ((1, 1.0), (31, 0.5), (32, 0.1), (33, 1.0), (1000, 0.003), (5000, 0.3), (70001, 0.02)):
+        has = rng.random(n) < share
+        has[rng.integers(n)] = True
+        rows = clip_rows(clip_rank(has), np.arange(n))
+        want = np.where(has, np.cumsum(has) - 1, -1)
+        assert np.array_equal(rows, want), (n, share)
+    assert clip_rank(np.zeros(0, bool)).shape == (0, 2)
+    assert clip_rank(np.ones(CLIP_WORD, bool))[0, 0] == 2**32 - 1  # every bit of a word
+
+
 # ---------------------------------------------------------------- GPU
 
 
@@ -256,3 +272,39 @@ def test_gpu_matches_the_twin_with_cut_splats(r):
     frags = subpixel_fragments_np(cloud, view, SplatOptions(quality="high"))
     rgb, alpha = composite_np(frags, view.lighting.background)
     assert np.abs(img_alpha - alpha).max() < 2e-4, np.abs(img_alpha - alpha).max()
+
+
+def test_each_point_reads_its_own_clip_planes(r):
+    """Few points with clip planes, scattered over many rank words and
+    uploaded in Morton order (not the cloud's): each plane passes through
+    its own splat at its own offset, so a point reading another point's
+    table row (the next, the previous, another word's) is cut elsewhere or
+    not at all, and the GPU's image leaves the twin's."""
+    cam = Camera((0.0, 0.0, 3.0), (0.0, 0.0, 0.0), fov=40.0)
+    px = 3.0 * 2 * math.tan(math.radians(20.0)) / SIZE[1]
+    rng = np.random.default_rng(11)
+    g = (np.arange(-18, 18) * 2.5 + 0.3) * px  # apart: each splat's alpha is its own
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    n = x.size  # 1296 points, 41 words
+    order = rng.permutation(n)
+    pos = np.c_[x[order], y[order], np.zeros(n)]
+    cut = rng.random(n) < 0.15
+    clips = np.zeros((n, 2, 5))
+    axis = rng.integers(0, 2, n)
+    sign = np.where(rng.random(n) < 0.5, 1.0, -1.0)
+    clips[cut, 0, axis[cut]] = sign[cut]
+    clips[cut, 0, 3] = sign[cut] * pos[cut, axis[cut]] + rng.uniform(0.05, 0.5, cut.sum()) * px
+    cloud = PointCloud(pos, np.tile([0.0, 0.0, 1.0], (n, 1)), np.full(n, (1.0 * px) ** 2),
+                       rng.uniform(0.1, 0.9, (n, 3)), np.zeros(n), np.full(n, 8.0), clips=clips)  # fmt: skip
+    img_alpha, view = draw_alpha(r, cloud, cam)
+    frags = subpixel_fragments_np(cloud, view, SplatOptions(quality="high"))
+    _, alpha = composite_np(frags, view.lighting.background)
+    assert np.abs(img_alpha - alpha).max() < 2e-4, np.abs(img_alpha - alpha).max()
+    # Each point's planes moved to the next point with planes: the twin differs.
+    shifted = clips.copy()
+    idx = np.flatnonzero(cut)
+    shifted[idx] = clips[np.roll(idx, 1)]
+    wrong = PointCloud(pos, cloud.normals, cloud.areas, cloud.kd, cloud.ks, cloud.shininess, clips=shifted)
+    _, alpha_wrong = composite_np(subpixel_fragments_np(wrong, view, SplatOptions(quality="high")),
+                                  view.lighting.background)  # fmt: skip
+    assert np.abs(img_alpha - alpha_wrong).max() > 0.05

@@ -34,27 +34,39 @@ ATTRIB_PER_ROW = 2048
 ATTRIBUTES = (("in_position", 3), ("in_normal", 3), ("in_size", 1), ("in_kd", 3), ("in_spec", 2))
 #: float32 values per point in the vertex buffer.
 FLOATS_PER_POINT = sum(k for _, k in ATTRIBUTES)
-#: The clip planes' attributes, in a buffer of their own made only for a cloud
-#: that has them (:attr:`~aniso3d.build.points.PointCloud.clips`; without it
-#: the shader reads OpenGL's default (0, 0, 0): none): ``in_clip0`` and
-#: ``in_clip1`` in the local frame, each (code, o, phi), the half-space
-#: ``s x_a <= o`` with code ``s (a + 1)`` (0: none).
-CLIP_ATTRIBUTES = (("in_clip0", 3), ("in_clip1", 3))
-#: float32 values per point in the clip planes' buffer.
-CLIP_FLOATS_PER_POINT = sum(k for _, k in CLIP_ATTRIBUTES)
-
+#: Clip planes (:attr:`~aniso3d.build.points.PointCloud.clips`) are few (a
+#: surface's ends: 0.3 % of the tree's points, 12 % of the room's), so they
+#: are not vertex attributes of every point but rows of a table, which
+#: splat.vert finds through a rank index over the points' buffer order: per
+#: :data:`CLIP_WORD` points one RG32UI texel, (bit i set: point i of the
+#: word has planes; how many points before the word have), so a point's row
+#: is that count plus the set bits below its own (:func:`clip_rows`). That is
+#: 8 bytes a word, a quarter byte a point, and 24 bytes a point with planes.
+CLIP_WORD = 32
+#: Rank words per row of the rank texture.
+CLIP_RANK_PER_ROW = 4096
+#: Table rows per row of the table texture (two RGB32F texels each: per
+#: plane (code, o, phi), the half-space ``s x_a <= o`` in the local frame,
+#: code ``s (a + 1)``, 0: none; :func:`clip_attributes`).
+CLIP_TABLE_PER_ROW = 2048
+#: float32 values per row of the clip table.
+CLIP_FLOATS_PER_ROW = 6
+#: Texture units of the clip rank index and the clip table while the splats
+#: of quality "high" are drawn (their passes sample no other textures).
+CLIP_RANK_UNIT, CLIP_TABLE_UNIT = 6, 7
 
 
 @dataclass(eq=False)
 class GPUPoints:
-    """A point cloud uploaded once: 12 float32 per point (6 more in ``clip_vbo``
-    for a cloud with clip planes), positions relative to
+    """A point cloud uploaded once: 12 float32 per point, positions relative to
     ``origin``, Morton-sorted, in blocks of :data:`BLOCK` points; and the
     per-point shading attributes again as a texture (two RGBA32F texels per
     point, :data:`ATTRIB_PER_ROW` points per row) for the deferred shading pass.
 
     ``block_lo``/``block_hi`` (B, 3) are the blocks' position bounds in the
-    local frame and ``block_size`` (B,) their largest ``sqrt(area)``.
+    local frame and ``block_size`` (B,) their largest ``sqrt(area)``. A cloud
+    with clip planes has them in ``clip_table``, found through ``clip_rank``
+    (:data:`CLIP_WORD`); ``n_clipped`` points have them.
     """
 
     vbo: moderngl.Buffer
@@ -71,8 +83,11 @@ class GPUPoints:
     vaos: dict = field(default_factory=dict)
     #: Median ``sqrt(area)`` of the points (of level 0 for a pyramid).
     typical_size: float = 0.0
-    #: The clip planes (:data:`CLIP_ATTRIBUTES`), None for a cloud without.
-    clip_vbo: moderngl.Buffer | None = None
+    #: The clip planes' rank index and table (:data:`CLIP_WORD`), None for a
+    #: cloud without.
+    clip_rank: moderngl.Texture | None = None
+    clip_table: moderngl.Texture | None = None
+    n_clipped: int = 0
 
 
 @dataclass(eq=False)
@@ -153,6 +168,46 @@ def clip_attributes(clips: np.ndarray, origin) -> np.ndarray:
     return np.stack([sign * (axis + 1), np.where(sign != 0, local, 0.0), angle], axis=-1).astype(np.float32)
 
 
+def clip_rank(has: np.ndarray) -> np.ndarray:
+    """(W, 2) uint32 rank index of the points ``has`` ((N,) bool, in buffer
+    order) marks, ``W = ceil(N / CLIP_WORD)``: per word of
+    :data:`CLIP_WORD` points the bit mask of the marked ones (bit i: point
+    ``CLIP_WORD w + i``) and how many points before the word are marked."""
+    has = np.asarray(has, dtype=bool).reshape(-1)
+    words = -(-len(has) // CLIP_WORD)
+    bits = np.zeros(words * CLIP_WORD, dtype=np.uint64)
+    bits[: len(has)] = has
+    bits = bits.reshape(words, CLIP_WORD)
+    mask = (bits << np.arange(CLIP_WORD, dtype=np.uint64)).sum(axis=1)
+    count = bits.sum(axis=1)
+    before = np.cumsum(count) - count
+    return np.stack([mask, before], axis=1).astype(np.uint32)
+
+
+def clip_rows(rank: np.ndarray, ids: np.ndarray) -> np.ndarray:
+    """(n,) int64 clip table row of the points ``ids`` (buffer indices) as
+    splat.vert finds it in ``rank`` (:func:`clip_rank`), -1 for a point
+    without clip planes: the marked points before its word plus the marked
+    ones below it in its word."""
+    ids = np.asarray(ids, dtype=np.int64)
+    word = np.asarray(rank, dtype=np.uint64)[ids // CLIP_WORD]
+    bit = np.uint64(1) << (ids % CLIP_WORD).astype(np.uint64)
+    below = word[:, 0] & (bit - np.uint64(1))
+    ones = np.unpackbits(below.astype("<u4").view(np.uint8).reshape(-1, 4), axis=1).sum(axis=1)
+    return np.where(word[:, 0] & bit, word[:, 1].astype(np.int64) + ones, -1)
+
+
+def _texture_rows(data: np.ndarray, per_row: int) -> tuple[np.ndarray, tuple[int, int]]:
+    """``data`` (n, c) padded with zero rows to whole texture rows of
+    ``per_row`` entries (one row of n, at least 1, if n is less), and the
+    texture's size in entries."""
+    per_row = min(per_row, max(1, len(data)))
+    rows = max(1, -(-len(data) // per_row))
+    out = np.zeros((rows * per_row, *data.shape[1:]), dtype=data.dtype)
+    out[: len(data)] = data
+    return out, (per_row, rows)
+
+
 def _upload_arrays(
     gl: GLContext, cls, arrays, order, bounds, origin, one_sided=None, clips=None, **extra
 ) -> GPUPoints:
@@ -179,9 +234,12 @@ def _upload_arrays(
     data[:, 7:10] = kd[order]
     data[:, 10] = ks[order]
     data[:, 11] = shininess[order]
-    clip_data = None
+    rank = table = None
     if clips is not None:
-        clip_data = clip_attributes(clips[order], origin).reshape(n, CLIP_FLOATS_PER_POINT)
+        clips = clips[order]
+        has = np.any(clips[..., :3] != 0, axis=(1, 2))
+        rank = clip_rank(has)
+        table = clip_attributes(clips[has], origin).reshape(-1, CLIP_FLOATS_PER_ROW)
     attrib = np.zeros((rows * ATTRIB_PER_ROW, 8), dtype=np.float32)
     attrib[:n, 0:3] = data[:, 3:6]
     attrib[:n, 3] = data[:, 10]
@@ -189,7 +247,19 @@ def _upload_arrays(
     attrib[:n, 7] = data[:, 11]
     ctx = gl.ctx
     vbo = gl.track(ctx.buffer(data.tobytes()))
-    clip_vbo = None if clip_data is None else gl.track(ctx.buffer(clip_data.tobytes()))
+    clip_tex, clip_nbytes = [None, None], 0
+    if rank is not None:
+        for k, (arr, per_row, comps) in enumerate(((rank, CLIP_RANK_PER_ROW, 2),
+                                                   (table, CLIP_TABLE_PER_ROW, 3))):  # fmt: skip
+            padded, (w, h) = _texture_rows(arr, per_row)
+            if h > gl.max_texture_size:
+                raise ResourceError(f"{n} points' clip planes need a texture of {h} rows, above this "
+                                    f"OpenGL's limit of {gl.max_texture_size}; draw the cloud in parts")  # fmt: skip
+            width = w * (2 if k else 1)
+            t = gl.track(ctx.texture((width, h), comps, padded.tobytes(), dtype="u4" if k == 0 else "f4"))
+            t.filter = moderngl.NEAREST, moderngl.NEAREST
+            clip_tex[k] = t
+            clip_nbytes += padded.nbytes
     tex = gl.track(
         ctx.texture((2 * ATTRIB_PER_ROW, rows), 4, attrib.tobytes(), dtype="f4")
     )
@@ -202,8 +272,10 @@ def _upload_arrays(
         origin=origin,
         bounds=bounds,
         n_points=n,
-        nbytes=data.nbytes + attrib.nbytes + (0 if clip_data is None else clip_data.nbytes),
-        clip_vbo=clip_vbo,
+        nbytes=data.nbytes + attrib.nbytes + clip_nbytes,
+        clip_rank=clip_tex[0],
+        clip_table=clip_tex[1],
+        n_clipped=0 if table is None else len(table),
         block_start=start,
         block_count=count,
         block_lo=np.minimum.reduceat(local, start, axis=0),
@@ -333,7 +405,8 @@ def select(handle: GPULodPoints, view: FrameView, pixel_error: float = 1.0) -> d
 
 def release_points(gl: GLContext, handle: GPUPoints) -> None:
     """Free an upload's GPU objects."""
-    gl.free(*handle.vaos.values(), handle.vbo, handle.attrib, *([handle.clip_vbo] if handle.clip_vbo else []))
+    gl.free(*handle.vaos.values(), handle.vbo, handle.attrib,
+            *(t for t in (handle.clip_rank, handle.clip_table) if t is not None))  # fmt: skip
     handle.vaos.clear()
     if isinstance(handle, GPULodPoints):
         gl.free(*handle.indexed_vaos.values(), handle.index_buffer)

@@ -25,7 +25,16 @@ from aniso3d.errors import ResourceError
 from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.frame import FrameView
 from aniso3d.rendering.splat import params
-from aniso3d.rendering.splat.buffers import ATTRIBUTES, CLIP_ATTRIBUTES, GPULodPoints, GPUPoints
+from aniso3d.rendering.splat.buffers import (
+    ATTRIBUTES,
+    CLIP_RANK_PER_ROW,
+    CLIP_RANK_UNIT,
+    CLIP_TABLE_PER_ROW,
+    CLIP_TABLE_UNIT,
+    CLIP_WORD,
+    GPULodPoints,
+    GPUPoints,
+)
 from aniso3d.rendering.splat.culling import depth_range, large_blocks
 from aniso3d.rendering.splat.geometry import mask_slicing
 from aniso3d.rendering.splat.options import SplatOptions
@@ -110,9 +119,13 @@ class SplatPipeline:
 
     # ------------------------------------------------------------ programs
 
-    def program(self, kind: str, shape: str, sprite: bool, aa: bool = False) -> moderngl.Program:
+    def program(
+        self, kind: str, shape: str, sprite: bool, aa: bool = False, clips: bool = False
+    ) -> moderngl.Program:
         """The splat program of a pass (geometry, visibility, accumulate, floor);
-        ``aa``: the coverage-aware variant of visibility and accumulate."""
+        ``aa``: the coverage-aware variant of visibility and accumulate;
+        ``clips`` (with ``aa``): reading each point's clip planes
+        (:data:`~aniso3d.rendering.splat.buffers.CLIP_WORD`)."""
         defines: dict[str, object] = {"ROUND": int(shape != "square")}
         if kind == "floor":
             return self.gl.program("splat.vert", "splat_floor.frag", defines=defines)
@@ -122,6 +135,9 @@ class SplatPipeline:
                 AA=1, LAYERS=AA_LAYERS, SLICES=AA_SLICES, FILTER=AA_FILTER, PLANE_REACH=float(AA_PLANE_REACH),
                 LAST_WEIGHTS=int(params.AA_LAST_WEIGHTS), SURFACE_REACH=float(params.AA_SURFACE_REACH),
             )
+            if clips:
+                defines.update(CLIPS=1, CLIP_WORD=CLIP_WORD, CLIP_RANK_PER_ROW=CLIP_RANK_PER_ROW,
+                               CLIP_TABLE_PER_ROW=CLIP_TABLE_PER_ROW)  # fmt: skip
         if sprite:
             return self.gl.program("splat.vert", "splat.frag", defines=defines)
         defines["GEOMETRY_PATH"] = 1
@@ -150,18 +166,14 @@ class SplatPipeline:
         if vao is None:
             if "in_position" not in prog:
                 raise ResourceError("splat vertex shader has no active in_position attribute")
-            content = []
-            for buffer, attributes in ((handle.vbo, ATTRIBUTES), (handle.clip_vbo, CLIP_ATTRIBUTES)):
-                if buffer is None or not any(name in prog for name, _ in attributes):
-                    continue  # no clip planes: the shader reads the default (0, 0, 0), none
-                fmt, names = [], []
-                for name, k in attributes:
-                    if name in prog:  # attributes a variant does not read are skipped
-                        fmt.append(f"{k}f")
-                        names.append(name)
-                    else:
-                        fmt.append(f"{4 * k}x")
-                content.append((buffer, " ".join(fmt), *names))
+            fmt, names = [], []
+            for name, k in ATTRIBUTES:
+                if name in prog:  # attributes a variant does not read are skipped
+                    fmt.append(f"{k}f")
+                    names.append(name)
+                else:
+                    fmt.append(f"{4 * k}x")
+            content = [(handle.vbo, " ".join(fmt), *names)]
             if indexed:
                 vao = self.gl.ctx.vertex_array(
                     prog, content, index_buffer=handle.index_buffer, index_element_size=4
@@ -261,7 +273,12 @@ class SplatPipeline:
             # code in a shader even where no pixel runs it), so those go there.
             limit = min(limit, AA_SHADE_BOX)
         uniforms = {**uniforms, "u_max_sprite": limit, "u_shade_box": AA_SHADE_BOX}
-        prog = self.program(kind, opts.splat, sprite=True, aa=aa)
+        clips = aa and handle.clip_table is not None
+        if clips:
+            handle.clip_rank.use(location=CLIP_RANK_UNIT)
+            handle.clip_table.use(location=CLIP_TABLE_UNIT)
+            uniforms.update(u_clip_rank=CLIP_RANK_UNIT, u_clip_table=CLIP_TABLE_UNIT)
+        prog = self.program(kind, opts.splat, sprite=True, aa=aa, clips=clips)
         self.bind(prog, uniforms)
         if indexed:
             self.vao(handle, prog, True).render(moderngl.POINTS, vertices=len(handle.drawn))
@@ -274,7 +291,7 @@ class SplatPipeline:
             hi = np.searchsorted(handle.drawn, [f + c for f, c in ranges])
             ranges = [(int(a), int(b - a)) for a, b in zip(lo, hi, strict=True) if b > a]
         if ranges:
-            prog = self.program(kind, opts.splat, sprite=False, aa=aa)
+            prog = self.program(kind, opts.splat, sprite=False, aa=aa, clips=clips)
             self.bind(prog, uniforms)
             vao = self.vao(handle, prog, indexed)
             for first, count in ranges:
