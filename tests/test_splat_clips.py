@@ -17,6 +17,7 @@ import pytest
 
 from aniso3d import PointCloud, ResourceError
 from aniso3d.build.mesh import Mesh
+from aniso3d.build.pyramid import LodPoints, pyramid
 from aniso3d.build.texture import build_texture
 from aniso3d.rendering.camera import Camera
 from aniso3d.rendering.frame import FrameView
@@ -56,12 +57,13 @@ def points_of(mesh: Mesh) -> tuple:
     return tex, texture_points(tex)
 
 
-def draw_alpha(r, cloud: PointCloud, cam: Camera) -> tuple[np.ndarray, FrameView]:
-    """(H, W) float32 alpha of ``cloud`` drawn with quality "high", row 0 at the top."""
-    near, far = cam.clip_range(cloud.bounds)
-    view = FrameView(cam, r.lighting, SIZE, near, far)
+def draw_alpha(r, cloud: PointCloud | LodPoints, cam: Camera, **options) -> tuple[np.ndarray, FrameView]:
+    """(H, W) float32 alpha of ``cloud`` drawn with quality "high" (and
+    ``options``), row 0 at the top."""
     impl = r.method_renderer("splat")
     handle = impl.upload(cloud)
+    near, far = cam.clip_range(handle.bounds)
+    view = FrameView(cam, r.lighting, SIZE, near, far)
     ctx = r.gl.ctx
     col, dep = ctx.texture(SIZE, 4, dtype="f4"), ctx.depth_texture(SIZE)
     fbo = ctx.framebuffer([col], dep)
@@ -69,7 +71,7 @@ def draw_alpha(r, cloud: PointCloud, cam: Camera) -> tuple[np.ndarray, FrameView
         fbo.use()
         ctx.viewport = (0, 0, *SIZE)
         fbo.clear(*r.lighting.background, 0.0, depth=1.0)
-        impl.draw(handle, view, fbo=fbo, quality="high")
+        impl.draw(handle, view, fbo=fbo, quality="high", **options)
         img = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(SIZE[1], SIZE[0], 4)
     finally:
         for obj in (fbo, col, dep):
@@ -225,6 +227,37 @@ def test_no_coverage_past_a_walls_end(r, distance, side):
     before, _ = draw_alpha(r, plain, cam)
     if distance < 1:  # resolved: discs reach a pixel and more past the ends
         assert before[past].max() > 0.1, before[past].max()
+
+
+@pytest.mark.parametrize("pixel_error", [8.0, 16.0, 32.0])
+def test_no_coverage_past_a_walls_end_at_every_level(r, pixel_error):
+    """The same wall drawn close up through its pyramid (level of detail),
+    with screen-space errors that draw levels 0 and 1, 1, and 2 (voxels up
+    to 4 times as wide: the wall's ends still on their grid planes): each
+    level's points are cut at their own voxels' faces; uncut
+    (``clips=False``) their discs reach past the ends."""
+    z = 0.5 + H / 2
+    tex, _ = points_of(quad(0.25, 0.75, 0.125, 0.5, z))
+    pyr = pyramid(tex)
+    cam = Camera((0.62, 0.75, z + 1.0), (0.5, 0.3, z), fov=40.0)
+    impl = r.method_renderer("splat")
+    handle = impl.upload(LodPoints(pyr))
+    try:
+        near, far = cam.clip_range(handle.bounds)
+        levels = impl.select(handle, FrameView(cam, r.lighting, SIZE, near, far), pixel_error)["points_per_level"]
+        assert handle.n_clipped > 0 and sum(levels[1:]) > 0, levels  # coarser levels drawn, with clip planes
+    finally:
+        impl.release(handle)
+    alpha, view = draw_alpha(r, LodPoints(pyr), cam, pixel_error=pixel_error)
+    hit = hit_points(view, z)
+    px = 0.75 * px_size(view, z) / abs(float(np.asarray(view.camera.forward)[2]))
+    past = (hit[..., 1] > 0.5 + px) | (hit[..., 0] > 0.75 + px) | (hit[..., 0] < 0.25 - px) | (hit[..., 1] < 0.125 - px)
+    inside = (hit[..., 1] < 0.5 - 2 * px) & (hit[..., 1] > 0.125 + 2 * px) & (np.abs(hit[..., 0] - 0.5) < 0.25 - 2 * px)
+    assert past.sum() > 100 and inside.sum() > 20
+    assert alpha[past].max() < 1e-3, alpha[past].max()
+    assert alpha[inside].min() > 0.9, alpha[inside].min()
+    before, _ = draw_alpha(r, LodPoints(pyr, clips=False), cam, pixel_error=pixel_error)
+    assert before[past].max() > 0.1, before[past].max()
 
 
 def test_a_square_sheets_alpha_is_its_projected_area(r):

@@ -23,6 +23,7 @@ from aniso3d.grid import ranges
 from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.frame import FrameView
 from aniso3d.rendering.select import select_voxels
+from aniso3d.rendering.splat.clips import clipped
 from aniso3d.rendering.splat.geometry import morton_order
 
 #: Points per block of the CPU's large-splat test (points are Morton-sorted, so
@@ -288,12 +289,17 @@ def _upload_arrays(
 
 def upload_lod(gl: GLContext, lod: LodPoints) -> GPULodPoints:
     """Every level's points in one buffer: level by level, finest first,
-    voxels in Morton order of their cells, a voxel's points together."""
+    voxels in Morton order of their cells, a voxel's points together; with
+    ``lod.clips``, each with the clip planes of its level's texture
+    (:func:`~aniso3d.rendering.splat.clips.clipped`)."""
     pyr = lod.pyramid
     clouds, parts, rank, run_first, run_count, level_first = [], [], [], [], [], []
     base = 0
     for lvl in range(len(pyr)):
         cloud, off = lod.level_cloud(lvl)
+        if lod.clips and cloud.clips is None and len(cloud):
+            counts = pyr.adaptive_counts(lvl) if lod.per_entry == "adaptive" else lod.per_entry
+            cloud = clipped(cloud, pyr[lvl], None, counts)
         m = pyr[lvl].n_voxels
         vorder = morton_order(pyr[lvl].coords) if m > 1 else np.arange(m)
         counts = (off[vorder + 1] - off[vorder]).astype(np.int64)

@@ -23,6 +23,8 @@ image and scaled back to its true area (all of which lies in the voxel).
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 from aniso3d.build.points import PointCloud
@@ -36,6 +38,13 @@ from aniso3d.rendering.volume import RUN_SHARE, entry_sheets
 #: surface meets it there, a box's edge, a room's corner).
 CLIP_KINDS = (OPEN, CREASE)
 
+#: Per texture (held weakly) and kinds, the entries with clip planes and
+#: their planes: the points of one texture are made again for every
+#: placement, count and normal (the bench's sweeps, a renderer's options),
+#: and the planes, a few per cent of the entries, cost a sheet
+#: classification each time.
+_CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
 
 def entry_clips(texture: AnisoTexture, kinds: tuple[int, ...] = CLIP_KINDS) -> np.ndarray:
     """(E, 2, 5) float64: per entry of ``texture`` the half-spaces ``m . x <=
@@ -43,7 +52,22 @@ def entry_clips(texture: AnisoTexture, kinds: tuple[int, ...] = CLIP_KINDS) -> n
     its voxel where its surface sheet's edges are of a kind in ``kinds``
     (:func:`~aniso3d.rendering.sheet_edges.sheet_edges`), and a crease's
     partner's angle ``phi`` about the edge from the sheet (0 for an open
-    edge; the sheet's normal is its entry's mean normal)."""
+    edge; the sheet's normal is its entry's mean normal). Computed once per
+    texture and ``kinds`` (a texture is not changed in place)."""
+    per_texture = _CACHE.setdefault(texture, {})
+    key = tuple(int(k) for k in kinds)
+    if key not in per_texture:
+        planes = _entry_clips(texture, key)
+        rows = np.flatnonzero(np.any(planes[..., :3] != 0, axis=(1, 2)))
+        per_texture[key] = (rows, planes[rows])
+    rows, planes = per_texture[key]
+    out = np.zeros((texture.n_entries, MAX_EDGES, 5))
+    out[rows] = planes
+    return out
+
+
+def _entry_clips(texture: AnisoTexture, kinds: tuple[int, ...]) -> np.ndarray:
+    """:func:`entry_clips`, computed."""
     E = texture.n_entries
     out = np.zeros((E, MAX_EDGES, 5))
     if E == 0:
