@@ -13,6 +13,9 @@ bounds) and its points as the corpus bench makes them (``texture_points``):
   afresh (any cache of them emptied first), median and range of ``--runs``
   runs, wall and CPU time of the process; and a second call on the same
   texture (the planes cached where the code caches them);
+- **frame time** (``--frames N``): N frames of the points with quality
+  "high" at the corpus bench's close camera (``Renderer.render``, after one
+  warm-up), median and range of wall and CPU time;
 - **level of detail** (``--lod``): the texture's pyramid drawn with quality
   "high" (``LodPoints``, screen-space error 1 px) from the corpus bench's
   minified camera and 2 and 4 times as far, with and without each level's
@@ -122,6 +125,19 @@ def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
           f"point, {points.nbytes / mesh_bytes:.2f}x the mesh); GPU {gpu} ({gpu / len(points):.2f} B a point); "
           f"texture_points {t['wall'][0]:.3f} s [{t['wall'][1]:.3f}-{t['wall'][2]:.3f}], cpu {t['cpu'][0]:.3f} s; "
           f"again {again:.3f} s", flush=True)  # fmt: skip
+    if args.frames:
+        cam = corpus_cameras(mesh, (args.size, args.size), args.resolution)[0].camera
+        draw = lambda: renderer.render(points, cam, "splat", splat=BASELINE["splat"], quality="high")  # noqa: E731
+        draw()
+        wall, cpu = [], []
+        for _ in range(args.frames):
+            w0, c0 = time.perf_counter(), time.process_time()
+            draw()
+            wall.append(time.perf_counter() - w0)
+            cpu.append(time.process_time() - c0)
+        row["frame"] = {"wall": [float(np.median(wall)), min(wall), max(wall)],
+                        "cpu": [float(np.median(cpu)), min(cpu), max(cpu)]}  # fmt: skip
+        print(f"  frame {frame_cell(row)} ms", flush=True)
     if args.lod:
         row["lod"] = lod_rows(mesh, tex, args, renderer)
     return [row]
@@ -170,6 +186,13 @@ def time_cell(r: dict) -> str:
     return f"{w[0]:.2f} [{w[1]:.2f}-{w[2]:.2f}]"
 
 
+def frame_cell(r: dict) -> str:
+    if "frame" not in r:
+        return "-"
+    w, c = r["frame"]["wall"], r["frame"]["cpu"]
+    return f"{1000 * w[0]:.0f} [{1000 * w[1]:.0f}-{1000 * w[2]:.0f}] ({1000 * c[0]:.0f})"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scenes", nargs="*", default=list(scenes.CORPUS))
@@ -178,6 +201,7 @@ def main() -> None:
     ap.add_argument("--gt-ssaa", type=int, default=8)
     ap.add_argument("--resolution", type=int, default=128)
     ap.add_argument("--directions", type=int, default=16)
+    ap.add_argument("--frames", type=int, default=0, help="also time this many frames of quality high")
     ap.add_argument("--lod", action="store_true", help="also the level-of-detail images")
     ap.add_argument("--json", default="", help="write the numbers here")
     ap.add_argument("--compare", default="", help="the --json of an earlier run: bytes and times side by side")
@@ -186,6 +210,7 @@ def main() -> None:
 
     run = run_scenes(args.scenes, args.size, lambda name, renderer: run_scene(name, args, renderer))
     command = f"demos/bench_splat_clips.py {' '.join(args.scenes)} --runs {args.runs}"
+    command += f" --frames {args.frames}" if args.frames else ""
     command += " --lod" if args.lod else ""
     command += f" --compare {args.compare}" if args.compare else ""
     if args.json:
@@ -195,7 +220,12 @@ def main() -> None:
              f"{args.directions}, the corpus bench's points (texture_points). B/pt: PointCloud.nbytes per point "
              "(the corpus bench's points bytes); x mesh: over the binary PLY; GPU: the upload's nbytes (vertex "
              "buffer, attribute texture, clip planes), MiB and per point. Time: texture_points afresh, seconds, "
-             f"median [fastest-slowest] of {args.runs} (wall); again: a second call on the same texture.", ""]
+             f"median [fastest-slowest] of {args.runs} (wall); again: a second call on the same texture."
+             + (f" Frame: quality \"high\" at {args.size}², the close camera, ms, median [fastest-slowest] of "
+                f"{args.frames} (wall), and the median CPU time of the process (all rasteriser threads)."
+                if args.frames else ""), ""]
+    head = ["scene", "points", "with clip planes", "B/pt", "x mesh", "GPU MiB", "GPU B/pt", "time s", "again s",
+            *(["frame ms (cpu)"] if args.frames else [])]  # fmt: skip
     if args.compare:
         with open(args.compare) as fh:
             before = json.load(fh)
@@ -209,14 +239,14 @@ def main() -> None:
             bo, bn = byte_cells(o), byte_cells(r)
             table.append([r["scene"], f"{r['points']:,}", f"{r['cut']:,} ({100 * r['cut'] / r['points']:.2f} %)",
                           f"{bo[0]} → {bn[0]}", f"{bo[1]} → {bn[1]}", f"{bo[2]} → {bn[2]}", f"{bo[3]} → {bn[3]}",
-                          f"{time_cell(o)} → {time_cell(r)}", f"{o['again']:.2f} → {r['again']:.2f}"])  # fmt: skip
-        parts += [markdown_table(["scene", "points", "with clip planes", "B/pt", "x mesh", "GPU MiB", "GPU B/pt",
-                                  "time s", "again s"], table), ""]  # fmt: skip
+                          f"{time_cell(o)} → {time_cell(r)}", f"{o['again']:.2f} → {r['again']:.2f}",
+                          *([f"{frame_cell(o)} → {frame_cell(r)}"] if args.frames else [])])  # fmt: skip
+        parts += [markdown_table(head, table), ""]  # fmt: skip
     else:
         table = [[r["scene"], f"{r['points']:,}", f"{r['cut']:,} ({100 * r['cut'] / r['points']:.2f} %)",
-                  *byte_cells(r), time_cell(r), f"{r['again']:.2f}"] for r in run.rows]  # fmt: skip
-        parts += [markdown_table(["scene", "points", "with clip planes", "B/pt", "x mesh", "GPU MiB", "GPU B/pt",
-                                  "time s", "again s"], table), ""]  # fmt: skip
+                  *byte_cells(r), time_cell(r), f"{r['again']:.2f}", *([frame_cell(r)] if args.frames else [])]
+                 for r in run.rows]  # fmt: skip
+        parts += [markdown_table(head, table), ""]  # fmt: skip
     if args.lod:
         parts += [f"Level of detail: the pyramid drawn with quality \"high\" at {args.size}², screen-space error "
                   f"1 px, {BASELINE['splat']} splats, PSNR (dB) / FLIP against {args.gt_ssaa}x{args.gt_ssaa} "
