@@ -24,7 +24,6 @@ from aniso3d.rendering.frame import FrameView
 from aniso3d.rendering.lighting import Lighting
 from aniso3d.rendering.renderer import Renderer
 from aniso3d.rendering.splat import SplatOptions
-from aniso3d.rendering.splat.buffers import CLIP_WORD, clip_rank, clip_rows
 from aniso3d.rendering.splat.clips import entry_clips, texture_points
 from aniso3d.rendering.splat.reference import clip_geometry_np, composite_np, rect_kept_np, subpixel_fragments_np
 
@@ -57,9 +56,9 @@ def points_of(mesh: Mesh) -> tuple:
     return tex, texture_points(tex)
 
 
-def draw_alpha(r, cloud: PointCloud | LodPoints, cam: Camera, **options) -> tuple[np.ndarray, FrameView]:
-    """(H, W) float32 alpha of ``cloud`` drawn with quality "high" (and
-    ``options``), row 0 at the top."""
+def draw_rgba(r, cloud: PointCloud | LodPoints, cam: Camera, **options) -> tuple[np.ndarray, FrameView]:
+    """(H, W, 4) float32 RGBA of ``cloud`` drawn with ``options`` (quality
+    "high" unless given), row 0 at the top."""
     impl = r.method_renderer("splat")
     handle = impl.upload(cloud)
     near, far = cam.clip_range(handle.bounds)
@@ -71,13 +70,20 @@ def draw_alpha(r, cloud: PointCloud | LodPoints, cam: Camera, **options) -> tupl
         fbo.use()
         ctx.viewport = (0, 0, *SIZE)
         fbo.clear(*r.lighting.background, 0.0, depth=1.0)
-        impl.draw(handle, view, fbo=fbo, quality="high", **options)
+        impl.draw(handle, view, fbo=fbo, **{"quality": "high", **options})
         img = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(SIZE[1], SIZE[0], 4)
     finally:
         for obj in (fbo, col, dep):
             obj.release()
         impl.release(handle)
-    return img[::-1, :, 3].copy(), view
+    return img[::-1].copy(), view
+
+
+def draw_alpha(r, cloud: PointCloud | LodPoints, cam: Camera, **options) -> tuple[np.ndarray, FrameView]:
+    """(H, W) float32 alpha of ``cloud`` drawn with quality "high" (and
+    ``options``), row 0 at the top."""
+    img, view = draw_rgba(r, cloud, cam, **options)
+    return img[..., 3].copy(), view
 
 
 def hit_points(view: FrameView, z: float) -> np.ndarray:
@@ -183,21 +189,6 @@ def test_a_cut_subpixel_splat_keeps_its_area_inside_a_surface():
         col = cut.pixel % SIZE[0]
         left = (col - SIZE[0] / 2) * px
         assert not np.any(left > clips[i, 0, 3] + 1e-9), i
-
-
-def test_clip_rows_count_the_marked_points_before_each():
-    """The rank index finds each marked point's row: the number of marked
-    points before it in buffer order (a cumulative sum, independent of the
-    bit packing); unmarked points get none."""
-    rng = np.random.default_rng(5)
-    for n, share in ((1, 1.0), (31, 0.5), (32, 0.1), (33, 1.0), (1000, 0.003), (5000, 0.3), (70001, 0.02)):
-        has = rng.random(n) < share
-        has[rng.integers(n)] = True
-        rows = clip_rows(clip_rank(has), np.arange(n))
-        want = np.where(has, np.cumsum(has) - 1, -1)
-        assert np.array_equal(rows, want), (n, share)
-    assert clip_rank(np.zeros(0, bool)).shape == (0, 2)
-    assert clip_rank(np.ones(CLIP_WORD, bool))[0, 0] == 2**32 - 1  # every bit of a word
 
 
 # ---------------------------------------------------------------- GPU
@@ -308,17 +299,17 @@ def test_gpu_matches_the_twin_with_cut_splats(r):
 
 
 def test_each_point_reads_its_own_clip_planes(r):
-    """Few points with clip planes, scattered over many rank words and
-    uploaded in Morton order (not the cloud's): each plane passes through
-    its own splat at its own offset, so a point reading another point's
-    table row (the next, the previous, another word's) is cut elsewhere or
-    not at all, and the GPU's image leaves the twin's."""
+    """Few points with clip planes, scattered through the cloud and uploaded
+    in Morton order (not the cloud's): each plane passes near its own
+    splat, at its own offset, so a point reading another point's table row
+    (the next, the previous) is cut elsewhere or not at all, and the GPU's
+    image leaves the twin's."""
     cam = Camera((0.0, 0.0, 3.0), (0.0, 0.0, 0.0), fov=40.0)
     px = 3.0 * 2 * math.tan(math.radians(20.0)) / SIZE[1]
     rng = np.random.default_rng(11)
     g = (np.arange(-18, 18) * 2.5 + 0.3) * px  # apart: each splat's alpha is its own
     x, y = (a.ravel() for a in np.meshgrid(g, g))
-    n = x.size  # 1296 points, 41 words
+    n = x.size  # 1296 points
     order = rng.permutation(n)
     pos = np.c_[x[order], y[order], np.zeros(n)]
     cut = rng.random(n) < 0.15
@@ -341,3 +332,28 @@ def test_each_point_reads_its_own_clip_planes(r):
     _, alpha_wrong = composite_np(subpixel_fragments_np(wrong, view, SplatOptions(quality="high")),
                                   view.lighting.background)  # fmt: skip
     assert np.abs(img_alpha - alpha_wrong).max() > 0.05
+
+
+@pytest.mark.parametrize("quality", ["blend", "fast"])
+def test_points_with_clip_planes_draw_as_before_below_high(r, quality):
+    """Qualities "blend" and "fast" do not cut: a cloud whose points (a
+    third of them, at random) have clip planes draws exactly as without
+    them, though those points' shininess is negated in the upload to mark
+    them for quality "high", which draws them apart (its images are held to
+    the twin above)."""
+    cam = Camera((0.3, 0.2, 3.0), (0.0, 0.0, 0.0), fov=40.0)
+    rng = np.random.default_rng(4)
+    n = 3000
+    pos = rng.uniform(-0.6, 0.6, (n, 3))
+    nrm = rng.normal(size=(n, 3))
+    clips = np.zeros((n, 2, 5))
+    cut = rng.random(n) < 0.33
+    clips[cut, 0, 0] = 1.0
+    clips[cut, 0, 3] = 0.0  # x <= 0: through the cloud
+    args = (pos, nrm, np.full(n, 0.03**2), rng.uniform(0.1, 0.9, (n, 3)), np.full(n, 0.5),
+            rng.choice([0.0, 8.0, 40.0], n))  # fmt: skip
+    plain, with_planes = PointCloud(*args), PointCloud(*args, clips=clips)
+    a, _ = draw_rgba(r, plain, cam, quality=quality)
+    b, _ = draw_rgba(r, with_planes, cam, quality=quality)
+    assert a[..., 3].sum() > 100
+    assert np.array_equal(a, b)

@@ -147,16 +147,15 @@ class PointCloud:
     def nbytes(self) -> int:
         """Bytes as uploaded for rendering: float32 position, normal, radius,
         RGB, ks, n = 12 floats per point (the coherence rides as the uploaded
-        normal's length), and where the cloud has clip planes, a table row of
-        6 floats per point that has them (two planes, each an axis code, an
-        offset and an angle) and 8 bytes per 32 points to find the rows
-        (aniso3d.rendering.splat.buffers.CLIP_WORD; the uploads pad both to
-        whole texture rows)."""
+        normal's length), and for each point with clip planes 18 more: its
+        12 again and its two planes (each an axis code, an offset and an
+        angle), quality "high" drawing those points apart
+        (aniso3d.rendering.splat.buffers.GPUPoints.cut)."""
         n = len(self)
         if self.clips is None:
             return int(n * 12 * 4)
         cut = int(np.any(self.clips[..., :3] != 0, axis=(1, 2)).sum())
-        return int(n * 12 * 4 + 8 * -(-n // 32) + cut * 6 * 4)
+        return int((n * 12 + cut * 18) * 4)
 
     def total_area(self) -> float:
         return float(self.areas.sum())

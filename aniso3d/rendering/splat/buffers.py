@@ -36,25 +36,23 @@ ATTRIBUTES = (("in_position", 3), ("in_normal", 3), ("in_size", 1), ("in_kd", 3)
 #: float32 values per point in the vertex buffer.
 FLOATS_PER_POINT = sum(k for _, k in ATTRIBUTES)
 #: Clip planes (:attr:`~aniso3d.build.points.PointCloud.clips`) are few (a
-#: surface's ends: 0.3 % of the tree's points, 12 % of the room's), so they
-#: are not vertex attributes of every point but rows of a table, which
-#: splat.vert finds through a rank index over the points' buffer order: per
-#: :data:`CLIP_WORD` points one RG32UI texel, (bit i set: point i of the
-#: word has planes; how many points before the word have), so a point's row
-#: is that count plus the set bits below its own (:func:`clip_rows`). That is
-#: 8 bytes a word, a quarter byte a point, and 24 bytes a point with planes.
-CLIP_WORD = 32
-#: Rank words per row of the rank texture.
-CLIP_RANK_PER_ROW = 4096
-#: Table rows per row of the table texture (two RGB32F texels each: per
-#: plane (code, o, phi), the half-space ``s x_a <= o`` in the local frame,
-#: code ``s (a + 1)``, 0: none; :func:`clip_attributes`).
+#: surface's ends: 0.3 % of the tree's points, 12 % of the room's), and the
+#: code that cuts a splat by them costs llvmpipe about a third of a high frame's
+#: vertex work for every point it runs on, planes or none (it runs every
+#: branch for every lane). So the points with planes are drawn apart: in the
+#: cloud's buffer their shininess is negated (its sign bit set; splat.vert
+#: reads its absolute value) and quality "high" skips them there; a second,
+#: small upload (:attr:`GPUPoints.cut`) holds them again, in buffer order,
+#: with their planes as rows of a table, the row of a point its index there:
+#: per plane (code, o, phi), the half-space ``s x_a <= o`` in the local frame,
+#: code ``s (a + 1)``, 0: none (:func:`clip_attributes`), two RGB32F texels a
+#: row, :data:`CLIP_TABLE_PER_ROW` rows a texture row.
 CLIP_TABLE_PER_ROW = 2048
 #: float32 values per row of the clip table.
 CLIP_FLOATS_PER_ROW = 6
-#: Texture units of the clip rank index and the clip table while the splats
-#: of quality "high" are drawn (their passes sample no other textures).
-CLIP_RANK_UNIT, CLIP_TABLE_UNIT = 6, 7
+#: Texture unit of the clip table while the cut points are drawn (the passes
+#: of quality "high" sample no other textures).
+CLIP_TABLE_UNIT = 7
 
 
 @dataclass(eq=False)
@@ -66,8 +64,9 @@ class GPUPoints:
 
     ``block_lo``/``block_hi`` (B, 3) are the blocks' position bounds in the
     local frame and ``block_size`` (B,) their largest ``sqrt(area)``. A cloud
-    with clip planes has them in ``clip_table``, found through ``clip_rank``
-    (:data:`CLIP_WORD`); ``n_clipped`` points have them.
+    with clip planes has the points that have them uploaded again in ``cut``
+    (their indices here ``cut_ids``, ascending; ``cut_mask`` (N,) marks them),
+    whose ``clip_table`` holds their planes (:data:`CLIP_TABLE_PER_ROW`).
     """
 
     vbo: moderngl.Buffer
@@ -84,11 +83,18 @@ class GPUPoints:
     vaos: dict = field(default_factory=dict)
     #: Median ``sqrt(area)`` of the points (of level 0 for a pyramid).
     typical_size: float = 0.0
-    #: The clip planes' rank index and table (:data:`CLIP_WORD`), None for a
-    #: cloud without.
-    clip_rank: moderngl.Texture | None = None
+    #: The points with clip planes, uploaded again (None: none), and where
+    #: they lie in this upload.
+    cut: GPUPoints | None = None
+    cut_ids: np.ndarray | None = None
+    cut_mask: np.ndarray | None = None
+    #: A cut upload's planes, a row per point (:data:`CLIP_TABLE_PER_ROW`).
     clip_table: moderngl.Texture | None = None
-    n_clipped: int = 0
+
+    @property
+    def n_clipped(self) -> int:
+        """Points with clip planes."""
+        return 0 if self.cut is None else self.cut.n_points
 
 
 @dataclass(eq=False)
@@ -169,35 +175,6 @@ def clip_attributes(clips: np.ndarray, origin) -> np.ndarray:
     return np.stack([sign * (axis + 1), np.where(sign != 0, local, 0.0), angle], axis=-1).astype(np.float32)
 
 
-def clip_rank(has: np.ndarray) -> np.ndarray:
-    """(W, 2) uint32 rank index of the points ``has`` ((N,) bool, in buffer
-    order) marks, ``W = ceil(N / CLIP_WORD)``: per word of
-    :data:`CLIP_WORD` points the bit mask of the marked ones (bit i: point
-    ``CLIP_WORD w + i``) and how many points before the word are marked."""
-    has = np.asarray(has, dtype=bool).reshape(-1)
-    words = -(-len(has) // CLIP_WORD)
-    bits = np.zeros(words * CLIP_WORD, dtype=np.uint64)
-    bits[: len(has)] = has
-    bits = bits.reshape(words, CLIP_WORD)
-    mask = (bits << np.arange(CLIP_WORD, dtype=np.uint64)).sum(axis=1)
-    count = bits.sum(axis=1)
-    before = np.cumsum(count) - count
-    return np.stack([mask, before], axis=1).astype(np.uint32)
-
-
-def clip_rows(rank: np.ndarray, ids: np.ndarray) -> np.ndarray:
-    """(n,) int64 clip table row of the points ``ids`` (buffer indices) as
-    splat.vert finds it in ``rank`` (:func:`clip_rank`), -1 for a point
-    without clip planes: the marked points before its word plus the marked
-    ones below it in its word."""
-    ids = np.asarray(ids, dtype=np.int64)
-    word = np.asarray(rank, dtype=np.uint64)[ids // CLIP_WORD]
-    bit = np.uint64(1) << (ids % CLIP_WORD).astype(np.uint64)
-    below = word[:, 0] & (bit - np.uint64(1))
-    ones = np.unpackbits(below.astype("<u4").view(np.uint8).reshape(-1, 4), axis=1).sum(axis=1)
-    return np.where(word[:, 0] & bit, word[:, 1].astype(np.int64) + ones, -1)
-
-
 def _texture_rows(data: np.ndarray, per_row: int) -> tuple[np.ndarray, tuple[int, int]]:
     """``data`` (n, c) padded with zero rows to whole texture rows of
     ``per_row`` entries (one row of n, at least 1, if n is less), and the
@@ -210,18 +187,21 @@ def _texture_rows(data: np.ndarray, per_row: int) -> tuple[np.ndarray, tuple[int
 
 
 def _upload_arrays(
-    gl: GLContext, cls, arrays, order, bounds, origin, one_sided=None, clips=None, **extra
+    gl: GLContext, cls, arrays, order, bounds, origin, one_sided=None, clips=None, attrib=True, **extra
 ) -> GPUPoints:
     """Upload the points ``order`` of ``arrays`` (positions, normals,
     areas, kd, ks, shininess), in that order, relative to ``origin``; a
     ``one_sided`` point (:attr:`~aniso3d.build.points.PointCloud.one_sided`)
-    gets its size negated (splat.vert culls it where it faces away); ``clips``
-    (:attr:`~aniso3d.build.points.PointCloud.clips`, None: none) are moved to
-    the local frame."""
+    gets its size negated (splat.vert culls it where it faces away); the
+    points with ``clips`` (:attr:`~aniso3d.build.points.PointCloud.clips`,
+    None: none) get their shininess negated and are uploaded again, with
+    their planes in the local frame (:attr:`GPUPoints.cut`). ``attrib``: make
+    the attribute texture (only the deferred shading of quality "fast" reads
+    it, and it never draws a cut upload)."""
     positions, normals, areas, kd, ks, shininess = arrays
     n = len(order)
     rows = -(-n // ATTRIB_PER_ROW)
-    if rows > gl.max_texture_size:
+    if attrib and rows > gl.max_texture_size:
         raise ResourceError(
             f"{n} points need a {2 * ATTRIB_PER_ROW}x{rows} attribute texture, above this "
             f"OpenGL's limit of {gl.max_texture_size}; draw the cloud in parts"
@@ -235,36 +215,29 @@ def _upload_arrays(
     data[:, 7:10] = kd[order]
     data[:, 10] = ks[order]
     data[:, 11] = shininess[order]
-    rank = table = None
+    ctx = gl.ctx
+    tex, attrib_nbytes = None, 0
+    if attrib:
+        values = np.zeros((rows * ATTRIB_PER_ROW, 8), dtype=np.float32)
+        values[:n, 0:3] = data[:, 3:6]
+        values[:n, 3] = data[:, 10]
+        values[:n, 4:7] = data[:, 7:10]
+        values[:n, 7] = data[:, 11]
+        tex = gl.track(ctx.texture((2 * ATTRIB_PER_ROW, rows), 4, values.tobytes(), dtype="f4"))
+        tex.filter = moderngl.NEAREST, moderngl.NEAREST
+        attrib_nbytes = values.nbytes
+    cut = cut_ids = cut_mask = None
     if clips is not None:
         clips = clips[order]
-        has = np.any(clips[..., :3] != 0, axis=(1, 2))
-        rank = clip_rank(has)
-        table = clip_attributes(clips[has], origin).reshape(-1, CLIP_FLOATS_PER_ROW)
-    attrib = np.zeros((rows * ATTRIB_PER_ROW, 8), dtype=np.float32)
-    attrib[:n, 0:3] = data[:, 3:6]
-    attrib[:n, 3] = data[:, 10]
-    attrib[:n, 4:7] = data[:, 7:10]
-    attrib[:n, 7] = data[:, 11]
-    ctx = gl.ctx
+        cut_mask = np.any(clips[..., :3] != 0, axis=(1, 2))
+        cut_ids = np.flatnonzero(cut_mask)
+        if len(cut_ids):
+            cut = _upload_cut(gl, cls, arrays, order[cut_ids], clips[cut_ids], bounds, origin,
+                              None if one_sided is None else one_sided)  # fmt: skip
+            data[cut_ids, 11] = -data[cut_ids, 11]  # the sign bit: drawn apart (-0.0 for 0)
+        else:
+            cut_ids = cut_mask = None
     vbo = gl.track(ctx.buffer(data.tobytes()))
-    clip_tex, clip_nbytes = [None, None], 0
-    if rank is not None:
-        for k, (arr, per_row, comps) in enumerate(((rank, CLIP_RANK_PER_ROW, 2),
-                                                   (table, CLIP_TABLE_PER_ROW, 3))):  # fmt: skip
-            padded, (w, h) = _texture_rows(arr, per_row)
-            if h > gl.max_texture_size:
-                raise ResourceError(f"{n} points' clip planes need a texture of {h} rows, above this "
-                                    f"OpenGL's limit of {gl.max_texture_size}; draw the cloud in parts")  # fmt: skip
-            width = w * (2 if k else 1)
-            t = gl.track(ctx.texture((width, h), comps, padded.tobytes(), dtype="u4" if k == 0 else "f4"))
-            t.filter = moderngl.NEAREST, moderngl.NEAREST
-            clip_tex[k] = t
-            clip_nbytes += padded.nbytes
-    tex = gl.track(
-        ctx.texture((2 * ATTRIB_PER_ROW, rows), 4, attrib.tobytes(), dtype="f4")
-    )
-    tex.filter = moderngl.NEAREST, moderngl.NEAREST
     start = np.arange(0, n, BLOCK)
     count = np.minimum(BLOCK, n - start)
     return cls(
@@ -273,10 +246,10 @@ def _upload_arrays(
         origin=origin,
         bounds=bounds,
         n_points=n,
-        nbytes=data.nbytes + attrib.nbytes + clip_nbytes,
-        clip_rank=clip_tex[0],
-        clip_table=clip_tex[1],
-        n_clipped=0 if table is None else len(table),
+        nbytes=data.nbytes + attrib_nbytes + (0 if cut is None else cut.nbytes),
+        cut=cut,
+        cut_ids=cut_ids,
+        cut_mask=cut_mask,
         block_start=start,
         block_count=count,
         block_lo=np.minimum.reduceat(local, start, axis=0),
@@ -285,6 +258,25 @@ def _upload_arrays(
         typical_size=float(np.median(size)),
         **extra,
     )
+
+
+def _upload_cut(gl: GLContext, cls, arrays, order, clips, bounds, origin, one_sided) -> GPUPoints:
+    """The points ``order`` of ``arrays`` with clip planes ``clips`` (their
+    rows, in that order) as a :attr:`GPUPoints.cut` upload: the same origin,
+    no attribute texture, the planes in its ``clip_table`` (row i: point i)."""
+    table = clip_attributes(clips, origin).reshape(-1, CLIP_FLOATS_PER_ROW)
+    padded, (w, h) = _texture_rows(table, CLIP_TABLE_PER_ROW)
+    if h > gl.max_texture_size:
+        raise ResourceError(f"{len(table)} points' clip planes need a texture of {h} rows, above this "
+                            f"OpenGL's limit of {gl.max_texture_size}; draw the cloud in parts")  # fmt: skip
+    cut = _upload_arrays(gl, GPULodPoints if cls is GPULodPoints else GPUPoints, arrays, order, bounds, origin,
+                         one_sided, attrib=False)  # fmt: skip
+    cut.clip_table = gl.track(gl.ctx.texture((2 * w, h), 3, padded.tobytes(), dtype="f4"))
+    cut.clip_table.filter = moderngl.NEAREST, moderngl.NEAREST
+    cut.nbytes += padded.nbytes
+    if isinstance(cut, GPULodPoints):
+        cut.index_buffer = gl.track(gl.ctx.buffer(reserve=4 * max(cut.n_points, 1)))
+    return cut
 
 
 def upload_lod(gl: GLContext, lod: LodPoints) -> GPULodPoints:
@@ -391,6 +383,15 @@ def select(handle: GPULodPoints, view: FrameView, pixel_error: float = 1.0) -> d
         handle.frame_box = (box, float(handle.level_size[used].max()))
     else:
         handle.frame_box = None
+    cut = handle.cut
+    if cut is not None:  # the drawn points with clip planes, as indices into their own upload
+        mine = idx[handle.cut_mask[idx]]
+        cut.drawn = np.searchsorted(handle.cut_ids, mine).astype(np.uint32)
+        if cut.drawn.nbytes > cut.index_buffer.size:
+            cut.index_buffer.orphan(max(cut.drawn.nbytes, 2 * cut.index_buffer.size))
+        if cut.drawn.nbytes:
+            cut.index_buffer.write(cut.drawn)
+        cut.frame_box = handle.frame_box
     t2 = time.perf_counter()
     stats = {
         "points": int(len(idx)),
@@ -411,8 +412,9 @@ def select(handle: GPULodPoints, view: FrameView, pixel_error: float = 1.0) -> d
 
 def release_points(gl: GLContext, handle: GPUPoints) -> None:
     """Free an upload's GPU objects."""
-    gl.free(*handle.vaos.values(), handle.vbo, handle.attrib,
-            *(t for t in (handle.clip_rank, handle.clip_table) if t is not None))  # fmt: skip
+    if handle.cut is not None:
+        release_points(gl, handle.cut)
+    gl.free(*handle.vaos.values(), handle.vbo, *(t for t in (handle.attrib, handle.clip_table) if t is not None))
     handle.vaos.clear()
     if isinstance(handle, GPULodPoints):
         gl.free(*handle.indexed_vaos.values(), handle.index_buffer)

@@ -25,16 +25,7 @@ from aniso3d.errors import ResourceError
 from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.frame import FrameView
 from aniso3d.rendering.splat import params
-from aniso3d.rendering.splat.buffers import (
-    ATTRIBUTES,
-    CLIP_RANK_PER_ROW,
-    CLIP_RANK_UNIT,
-    CLIP_TABLE_PER_ROW,
-    CLIP_TABLE_UNIT,
-    CLIP_WORD,
-    GPULodPoints,
-    GPUPoints,
-)
+from aniso3d.rendering.splat.buffers import ATTRIBUTES, CLIP_TABLE_PER_ROW, CLIP_TABLE_UNIT, GPULodPoints, GPUPoints
 from aniso3d.rendering.splat.culling import depth_range, large_blocks
 from aniso3d.rendering.splat.geometry import mask_slicing
 from aniso3d.rendering.splat.options import SplatOptions
@@ -124,8 +115,8 @@ class SplatPipeline:
     ) -> moderngl.Program:
         """The splat program of a pass (geometry, visibility, accumulate, floor);
         ``aa``: the coverage-aware variant of visibility and accumulate;
-        ``clips`` (with ``aa``): reading each point's clip planes
-        (:data:`~aniso3d.rendering.splat.buffers.CLIP_WORD`)."""
+        ``clips`` (with ``aa``): for a cut upload, each point's clip planes
+        read from its table (:attr:`~aniso3d.rendering.splat.buffers.GPUPoints.cut`)."""
         defines: dict[str, object] = {"ROUND": int(shape != "square")}
         if kind == "floor":
             return self.gl.program("splat.vert", "splat_floor.frag", defines=defines)
@@ -136,8 +127,7 @@ class SplatPipeline:
                 LAST_WEIGHTS=int(params.AA_LAST_WEIGHTS), SURFACE_REACH=float(params.AA_SURFACE_REACH),
             )
             if clips:
-                defines.update(CLIPS=1, CLIP_WORD=CLIP_WORD, CLIP_RANK_PER_ROW=CLIP_RANK_PER_ROW,
-                               CLIP_TABLE_PER_ROW=CLIP_TABLE_PER_ROW)  # fmt: skip
+                defines.update(CLIPS=1, CLIP_TABLE_PER_ROW=CLIP_TABLE_PER_ROW)
         if sprite:
             return self.gl.program("splat.vert", "splat.frag", defines=defines)
         defines["GEOMETRY_PATH"] = 1
@@ -261,10 +251,11 @@ class SplatPipeline:
         self, handle: GPUPoints, view: FrameView, opts: SplatOptions, kind: str, uniforms: dict
     ) -> None:
         """One pass over the points: sprites, then the wide splats' quads. A
-        pyramid upload draws this frame's selection (``handle.drawn``)."""
-        indexed = isinstance(handle, GPULodPoints)
-        if indexed and not len(handle.drawn):
-            return
+        pyramid upload draws this frame's selection (``handle.drawn``).
+        Quality "high" draws the points with clip planes apart, from their own
+        upload (:attr:`~aniso3d.rendering.splat.buffers.GPUPoints.cut`), with
+        the program that reads and cuts by them; the others' program has no
+        clipping code (llvmpipe runs it for every point it is in)."""
         aa = opts.quality == "high"
         limit = self.max_sprite
         if aa and kind == "accumulate":
@@ -273,11 +264,20 @@ class SplatPipeline:
             # code in a shader even where no pixel runs it), so those go there.
             limit = min(limit, AA_SHADE_BOX)
         uniforms = {**uniforms, "u_max_sprite": limit, "u_shade_box": AA_SHADE_BOX}
-        clips = aa and handle.clip_table is not None
-        if clips:
-            handle.clip_rank.use(location=CLIP_RANK_UNIT)
-            handle.clip_table.use(location=CLIP_TABLE_UNIT)
-            uniforms.update(u_clip_rank=CLIP_RANK_UNIT, u_clip_table=CLIP_TABLE_UNIT)
+        self._draw(handle, view, opts, kind, uniforms, limit, aa, clips=False)
+        if aa and handle.cut is not None:
+            handle.cut.clip_table.use(location=CLIP_TABLE_UNIT)
+            self._draw(handle.cut, view, opts, kind, {**uniforms, "u_clip_table": CLIP_TABLE_UNIT}, limit, aa,
+                       clips=True)  # fmt: skip
+
+    def _draw(
+        self, handle: GPUPoints, view: FrameView, opts: SplatOptions, kind: str, uniforms: dict, limit: float,
+        aa: bool, clips: bool,
+    ) -> None:  # fmt: skip
+        """:meth:`splats` of one upload, sprites up to ``limit`` pixels."""
+        indexed = isinstance(handle, GPULodPoints)
+        if indexed and not len(handle.drawn):
+            return
         prog = self.program(kind, opts.splat, sprite=True, aa=aa, clips=clips)
         self.bind(prog, uniforms)
         if indexed:
