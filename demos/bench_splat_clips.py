@@ -23,6 +23,11 @@ bounds) and its points as the corpus bench makes them (``texture_points``):
   polygons in the object's box; and the share of each level's points with
   clip planes.
 
+``--images DIR`` saves the float RGBA of the points drawn with quality
+"high" at the corpus bench's two cameras; ``--images-against DIR`` (the
+``--images`` of a run on earlier code) reports the largest difference from
+them per scene.
+
 ``--json`` writes the numbers; ``--compare BEFORE.json`` (the ``--json`` of
 a run of the same script on earlier code, e.g. a copy of the parent commit
 put first on ``PYTHONPATH``) adds the bytes and times side by side.
@@ -35,6 +40,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import time
 
 import numpy as np
@@ -84,8 +90,8 @@ def timed(fn, runs: int) -> dict:
     return {"wall": [float(np.median(wall)), min(wall), max(wall)], "cpu": [float(np.median(cpu)), min(cpu), max(cpu)]}
 
 
-def draw_rgb(renderer: Renderer, thing, camera: Camera, size: tuple[int, int]) -> np.ndarray:
-    """(H, W, 3) uint8 of ``thing`` (a cloud or LodPoints) drawn with quality "high"."""
+def draw_rgba(renderer: Renderer, thing, camera: Camera, size: tuple[int, int]) -> np.ndarray:
+    """(H, W, 4) float32 of ``thing`` (a cloud or LodPoints) drawn with quality "high"."""
     impl = renderer.method_renderer("splat")
     ctx = renderer.gl.ctx
     handle = impl.upload(thing)
@@ -103,7 +109,12 @@ def draw_rgb(renderer: Renderer, thing, camera: Camera, size: tuple[int, int]) -
         for obj in (fbo, col, dep):
             obj.release()
         impl.release(handle)
-    return (np.clip(rgba[..., :3], 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+    return rgba.copy()
+
+
+def draw_rgb(renderer: Renderer, thing, camera: Camera, size: tuple[int, int]) -> np.ndarray:
+    """(H, W, 3) uint8 of ``thing`` drawn with quality "high"."""
+    return (np.clip(draw_rgba(renderer, thing, camera, size)[..., :3], 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
 
 
 def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
@@ -138,6 +149,20 @@ def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
         row["frame"] = {"wall": [float(np.median(wall)), min(wall), max(wall)],
                         "cpu": [float(np.median(cpu)), min(cpu), max(cpu)]}  # fmt: skip
         print(f"  frame {frame_cell(row)} ms", flush=True)
+    if args.images or args.images_against:
+        worst, differing = 0.0, 0
+        for spec in corpus_cameras(mesh, (args.size, args.size), args.resolution):
+            img = draw_rgba(renderer, points, spec.camera, (args.size, args.size))
+            path = f"{name}_{spec.label}.npy"
+            if args.images:
+                os.makedirs(args.images, exist_ok=True)
+                np.save(os.path.join(args.images, path), img)
+            if args.images_against:
+                diff = np.abs(img.astype(np.float64) - np.load(os.path.join(args.images_against, path)))
+                worst, differing = max(worst, float(diff.max())), differing + int((diff.max(axis=-1) > 0).sum())
+        if args.images_against:
+            row["image_diff"] = [worst, differing]
+            print(f"  images: largest difference {worst:.3g}, {differing} pixels differ", flush=True)
     if args.lod:
         row["lod"] = lod_rows(mesh, tex, args, renderer)
     return [row]
@@ -193,6 +218,11 @@ def frame_cell(r: dict) -> str:
     return f"{1000 * w[0]:.0f} [{1000 * w[1]:.0f}-{1000 * w[2]:.0f}] ({1000 * c[0]:.0f})"
 
 
+def image_cell(r: dict) -> str:
+    worst, differing = r["image_diff"]
+    return f"{worst:.1e} ({differing:,})"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scenes", nargs="*", default=list(scenes.CORPUS))
@@ -203,6 +233,8 @@ def main() -> None:
     ap.add_argument("--directions", type=int, default=16)
     ap.add_argument("--frames", type=int, default=0, help="also time this many frames of quality high")
     ap.add_argument("--lod", action="store_true", help="also the level-of-detail images")
+    ap.add_argument("--images", default="", help="save the float RGBA images of quality high in this folder")
+    ap.add_argument("--images-against", default="", help="an earlier run's --images: the largest differences")
     ap.add_argument("--json", default="", help="write the numbers here")
     ap.add_argument("--compare", default="", help="the --json of an earlier run: bytes and times side by side")
     ap.add_argument("--md", default="", help="Markdown file to write the tables into (between its markers)")
@@ -212,6 +244,7 @@ def main() -> None:
     command = f"demos/bench_splat_clips.py {' '.join(args.scenes)} --runs {args.runs}"
     command += f" --frames {args.frames}" if args.frames else ""
     command += " --lod" if args.lod else ""
+    command += f" --images-against {args.images_against}" if args.images_against else ""
     command += f" --compare {args.compare}" if args.compare else ""
     if args.json:
         with open(args.json, "w") as fh:
@@ -223,9 +256,13 @@ def main() -> None:
              f"median [fastest-slowest] of {args.runs} (wall); again: a second call on the same texture."
              + (f" Frame: quality \"high\" at {args.size}², the close camera, ms, median [fastest-slowest] of "
                 f"{args.frames} (wall), and the median CPU time of the process (all rasteriser threads)."
-                if args.frames else ""), ""]
+                if args.frames else "")
+             + (" Image Δ: the largest difference of the float RGBA of quality \"high\" at the two corpus cameras "
+                f"from {args.images_against}'s, and the pixels that differ at all." if args.images_against else ""),
+             ""]
     head = ["scene", "points", "with clip planes", "B/pt", "x mesh", "GPU MiB", "GPU B/pt", "time s", "again s",
-            *(["frame ms (cpu)"] if args.frames else [])]  # fmt: skip
+            *(["frame ms (cpu)"] if args.frames else []),
+            *(["image Δ max (pixels)"] if args.images_against else [])]  # fmt: skip
     if args.compare:
         with open(args.compare) as fh:
             before = json.load(fh)
@@ -240,12 +277,13 @@ def main() -> None:
             table.append([r["scene"], f"{r['points']:,}", f"{r['cut']:,} ({100 * r['cut'] / r['points']:.2f} %)",
                           f"{bo[0]} → {bn[0]}", f"{bo[1]} → {bn[1]}", f"{bo[2]} → {bn[2]}", f"{bo[3]} → {bn[3]}",
                           f"{time_cell(o)} → {time_cell(r)}", f"{o['again']:.2f} → {r['again']:.2f}",
-                          *([f"{frame_cell(o)} → {frame_cell(r)}"] if args.frames else [])])  # fmt: skip
+                          *([f"{frame_cell(o)} → {frame_cell(r)}"] if args.frames else []),
+                          *([image_cell(r)] if args.images_against else [])])  # fmt: skip
         parts += [markdown_table(head, table), ""]  # fmt: skip
     else:
         table = [[r["scene"], f"{r['points']:,}", f"{r['cut']:,} ({100 * r['cut'] / r['points']:.2f} %)",
-                  *byte_cells(r), time_cell(r), f"{r['again']:.2f}", *([frame_cell(r)] if args.frames else [])]
-                 for r in run.rows]  # fmt: skip
+                  *byte_cells(r), time_cell(r), f"{r['again']:.2f}", *([frame_cell(r)] if args.frames else []),
+                  *([image_cell(r)] if args.images_against else [])] for r in run.rows]  # fmt: skip
         parts += [markdown_table(head, table), ""]  # fmt: skip
     if args.lod:
         parts += [f"Level of detail: the pyramid drawn with quality \"high\" at {args.size}², screen-space error "
