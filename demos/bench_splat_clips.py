@@ -14,8 +14,9 @@ bounds) and its points as the corpus bench makes them (``texture_points``):
   runs, wall and CPU time of the process; and a second call on the same
   texture (the planes cached where the code caches them);
 - **frame time** (``--frames N``): N frames of the points with quality
-  "high" at the corpus bench's close camera (``Renderer.render``, after one
-  warm-up), median and range of wall and CPU time;
+  "high" at the corpus bench's two cameras (``Renderer.render``, after one
+  warm-up), the median CPU time of the process (all rasteriser threads; the
+  JSON has wall times too);
 - **level of detail** (``--lod``): the texture's pyramid drawn with quality
   "high" (``LodPoints``, screen-space error 1 px) from the corpus bench's
   minified camera and 2 and 4 times as far, with and without each level's
@@ -137,17 +138,19 @@ def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
           f"texture_points {t['wall'][0]:.3f} s [{t['wall'][1]:.3f}-{t['wall'][2]:.3f}], cpu {t['cpu'][0]:.3f} s; "
           f"again {again:.3f} s", flush=True)  # fmt: skip
     if args.frames:
-        cam = corpus_cameras(mesh, (args.size, args.size), args.resolution)[0].camera
-        draw = lambda: renderer.render(points, cam, "splat", splat=BASELINE["splat"], quality="high")  # noqa: E731
-        draw()
-        wall, cpu = [], []
-        for _ in range(args.frames):
-            w0, c0 = time.perf_counter(), time.process_time()
+        row["frame"] = {}
+        for spec in corpus_cameras(mesh, (args.size, args.size), args.resolution):
+            draw = lambda cam=spec.camera: renderer.render(points, cam, "splat", splat=BASELINE["splat"],  # noqa: E731
+                                                           quality="high")  # fmt: skip
             draw()
-            wall.append(time.perf_counter() - w0)
-            cpu.append(time.process_time() - c0)
-        row["frame"] = {"wall": [float(np.median(wall)), min(wall), max(wall)],
-                        "cpu": [float(np.median(cpu)), min(cpu), max(cpu)]}  # fmt: skip
+            wall, cpu = [], []
+            for _ in range(args.frames):
+                w0, c0 = time.perf_counter(), time.process_time()
+                draw()
+                wall.append(time.perf_counter() - w0)
+                cpu.append(time.process_time() - c0)
+            row["frame"][spec.label] = {"wall": [float(np.median(wall)), min(wall), max(wall)],
+                                        "cpu": [float(np.median(cpu)), min(cpu), max(cpu)]}  # fmt: skip
         print(f"  frame {frame_cell(row)} ms", flush=True)
     if args.images or args.images_against:
         worst, differing = 0.0, 0
@@ -212,10 +215,10 @@ def time_cell(r: dict) -> str:
 
 
 def frame_cell(r: dict) -> str:
+    """CPU ms of a frame, median, at each camera."""
     if "frame" not in r:
         return "-"
-    w, c = r["frame"]["wall"], r["frame"]["cpu"]
-    return f"{1000 * w[0]:.0f} [{1000 * w[1]:.0f}-{1000 * w[2]:.0f}] ({1000 * c[0]:.0f})"
+    return " / ".join(f"{1000 * f['cpu'][0]:.0f}" for f in r["frame"].values())
 
 
 def image_cell(r: dict) -> str:
@@ -244,6 +247,7 @@ def main() -> None:
     command = f"demos/bench_splat_clips.py {' '.join(args.scenes)} --runs {args.runs}"
     command += f" --frames {args.frames}" if args.frames else ""
     command += " --lod" if args.lod else ""
+    command += f" --images {args.images}" if args.images else ""
     command += f" --images-against {args.images_against}" if args.images_against else ""
     command += f" --compare {args.compare}" if args.compare else ""
     if args.json:
@@ -254,14 +258,14 @@ def main() -> None:
              "(the corpus bench's points bytes); x mesh: over the binary PLY; GPU: the upload's nbytes (vertex "
              "buffer, attribute texture, clip planes), MiB and per point. Time: texture_points afresh, seconds, "
              f"median [fastest-slowest] of {args.runs} (wall); again: a second call on the same texture."
-             + (f" Frame: quality \"high\" at {args.size}², the close camera, ms, median [fastest-slowest] of "
-                f"{args.frames} (wall), and the median CPU time of the process (all rasteriser threads)."
+             + (f" Frame: quality \"high\" at {args.size}² at the close and the minified camera, the median CPU "
+                f"time of the process (all rasteriser threads) over {args.frames} frames, ms."
                 if args.frames else "")
              + (" Image Δ: the largest difference of the float RGBA of quality \"high\" at the two corpus cameras "
                 f"from {args.images_against}'s, and the pixels that differ at all." if args.images_against else ""),
              ""]
     head = ["scene", "points", "with clip planes", "B/pt", "x mesh", "GPU MiB", "GPU B/pt", "time s", "again s",
-            *(["frame ms (cpu)"] if args.frames else []),
+            *(["frame CPU ms close / minified"] if args.frames else []),
             *(["image Δ max (pixels)"] if args.images_against else [])]  # fmt: skip
     if args.compare:
         with open(args.compare) as fh:

@@ -162,18 +162,30 @@ void cull() {
 #ifdef GEOMETRY_PATH
     vs_box = vec4(1.0, 1.0, 0.0, 0.0);
 #else
-#ifdef AA
-    // A point inside the clip volume whose one fragment splat.frag discards
-    // (the box it may draw, clip, is empty): one vertex outside the volume
-    // sends llvmpipe's whole batch down its clipping path (the default
-    // tree's high frame cost a third more with 0.3 % of its points culled).
-    gl_Position = vec4(0.0, 0.0, 0.0, 1.0);
-    gl_PointSize = 1.0;
-    vs_out.clip = vec4(1.0, 1.0, 0.0, 0.0);
-#else
     gl_Position = vec4(0.0, 0.0, 2.0, 1.0);  // outside the clip volume
     gl_PointSize = 1.0;
 #endif
+}
+
+// cull() for splats dropped here and there among drawn ones (hidden at a
+// crease, drawn from the cut upload): one vertex outside the clip volume
+// sends llvmpipe's whole batch of vertices down its clipping path (the
+// default tree's high frame cost a fifth more for 0.3 % of its points), so
+// with AA such a splat is a point inside the volume, spread over the image
+// by its index (no one tile gets them all), whose one fragment splat.frag
+// discards at once (the box it may draw, clip, is empty). Splats dropped in
+// runs (a closed surface's back, off screen) keep cull(): a batch of them
+// all outside costs little, and each of their points inside would cost a
+// fragment.
+void cull_scattered() {
+#if defined(AA) && !defined(GEOMETRY_PATH)
+    ivec2 size = ivec2(u_viewport);
+    ivec2 px = ivec2(gl_VertexID % size.x, (gl_VertexID / size.x) % size.y);
+    gl_Position = vec4((vec2(px) + 0.5) / u_viewport * 2.0 - 1.0, 0.0, 1.0);
+    gl_PointSize = 1.0;
+    vs_out.clip = vec4(1.0, 1.0, 0.0, 0.0);
+#else
+    cull();
 #endif
 }
 
@@ -230,7 +242,7 @@ void main() {
 #endif
 #ifdef SKIP_CUT
     if (floatBitsToUint(in_spec.y) >= 0x80000000u) {  // drawn from the cut upload
-        cull();
+        cull_scattered();
         return;
     }
 #endif
@@ -246,7 +258,7 @@ void main() {
 #ifdef AA
     // A splat hidden behind the surface meeting it at a clip plane is not drawn.
     if (hidden_at(in_clip0, n, u_q0 - u_t0 * u_ray[0]) || hidden_at(in_clip1, n, u_q0 - u_t0 * u_ray[0])) {
-        cull();
+        cull_scattered();
         return;
     }
 #endif
