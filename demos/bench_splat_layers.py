@@ -26,16 +26,25 @@ deterministic: no spread to report.
 
 from __future__ import annotations
 
-import argparse
 from contextlib import contextmanager
 
 import numpy as np
 
-from aniso3d import PointCloud, metrics
-from aniso3d.bench.corpus import corpus_cameras
-from aniso3d.bench.outputs import markdown_table, write_between_markers
-from aniso3d.bench.run import run_scenes
+from aniso3d import PointCloud
+from aniso3d.bench.outputs import markdown_table
 from aniso3d.bench.settings import BASELINE
+from aniso3d.bench.variants import (
+    as_good,
+    command,
+    corpus_parser,
+    delta,
+    pair,
+    print_scores,
+    publish,
+    run_corpus_demo,
+    scene_cameras,
+    scored,
+)
 from aniso3d.build import scenes
 from aniso3d.build.texture import build_texture
 from aniso3d.rendering.renderer import Renderer
@@ -68,48 +77,25 @@ def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
     two = PointCloud(points.positions, points.normals, points.areas * np.where(one, cover, 1.0), points.kd,
                      points.ks, points.shininess, coherence=points.coherence)  # fmt: skip
     rows = []
-    for spec in corpus_cameras(mesh, (args.size, args.size), args.resolution):
-        truth = renderer.render(mesh, spec.camera, "mesh", ssaa=args.gt_ssaa)
-        row = {"scene": name, "camera": spec.label}
-        for label, ssaa in (("1 spp", 1), ("2x2", 2)):
-            m = metrics.compare_in_box(truth, renderer.render(mesh, spec.camera, "mesh", ssaa=ssaa), spec.crop,
-                                       with_flip=True)  # fmt: skip
-            row[label] = (m["psnr"], m["flip"])
+    for spec, truth, row in scene_cameras(renderer, mesh, name, args):
         for v in VARIANTS:
             with variant(v):
                 cloud = points if VARIANTS[v][2] else two
                 img = renderer.render(cloud, spec.camera, "splat", splat=BASELINE["splat"], quality="high")
-            m = metrics.compare_in_box(truth, img, spec.crop, with_flip=True)
-            row[v] = (m["psnr"], m["flip"])
+            row[v] = scored(truth, img, spec)
         rows.append(row)
-        print(f"  {spec.label}: " + ", ".join(f"{k} {v[0]:.2f}/{v[1]:.4f}" for k, v in row.items()
-                                              if isinstance(v, tuple)), flush=True)  # fmt: skip
+        print_scores(spec.label, row)
     return rows
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("scenes", nargs="*", default=list(scenes.CORPUS))
-    ap.add_argument("--size", type=int, default=512)
-    ap.add_argument("--gt-ssaa", type=int, default=8)
-    ap.add_argument("--resolution", type=int, default=128)
-    ap.add_argument("--directions", type=int, default=16)
-    ap.add_argument("--md", default="", help="Markdown file to write the table into (between its markers)")
-    args = ap.parse_args()
-
-    run = run_scenes(args.scenes, args.size, lambda name, renderer: run_scene(name, args, renderer))
-    rows = run.rows
-
+    args = corpus_parser(__doc__.splitlines()[0], scenes.CORPUS).parse_args()
+    run = run_corpus_demo(args, run_scene)
     columns = ["1 spp", "2x2", *VARIANTS]
-    table = []
-    for r in rows:
-        beats = r["all"][0] >= r["2x2"][0] and r["all"][1] <= r["2x2"][1]
-        table.append([r["scene"], r["camera"], *(f"{r[c][0]:.2f} / {r[c][1]:.4f}" for c in columns),
-                      f"{r['all'][0] - r['before'][0]:+.2f}", f"{r['all'][1] - r['before'][1]:+.4f}",
-                      "yes" if beats else "no"])  # fmt: skip
-    parts = [
-        BEGIN,
-        run.header(f"demos/bench_splat_layers.py {' '.join(args.scenes)} --size {args.size}") + " "
+    table = [[r["scene"], r["camera"], *(pair(r[c]) for c in columns), *delta(r["all"], r["before"]),
+              as_good(r["all"], r["2x2"])] for r in run.rows]  # fmt: skip
+    publish([
+        run.header(command("demos/bench_splat_layers.py", args)) + " "
         f"Texture {args.resolution}^3, K = {args.directions}, the corpus bench's points and {BASELINE['splat']} "
         "splats, quality \"high\"; truth "
         f"{args.gt_ssaa}x{args.gt_ssaa} polygons; PSNR (dB) / FLIP inside the object's box, as the corpus bench. "
@@ -118,13 +104,7 @@ def main() -> None:
         "polygons in PSNR and FLIP.",
         "",
         markdown_table(["scene", "camera", *columns, "Δ PSNR", "Δ FLIP", "≥ 2x2"], table),
-        END,
-    ]
-    block = "\n".join(parts)
-    print("\n" + block)
-    if args.md:
-        path = write_between_markers(args.md, block, BEGIN, END, title="# Anti-aliased splats\n\n")
-        print(f"wrote {path}")
+    ], args.md, BEGIN, END, title="# Anti-aliased splats\n\n")  # fmt: skip
 
 
 if __name__ == "__main__":

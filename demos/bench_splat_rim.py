@@ -30,13 +30,20 @@ report.
 
 from __future__ import annotations
 
-import argparse
-
-from aniso3d import metrics
-from aniso3d.bench.corpus import corpus_cameras
-from aniso3d.bench.outputs import markdown_table, write_between_markers
-from aniso3d.bench.run import run_scenes
+from aniso3d.bench.outputs import markdown_table
 from aniso3d.bench.settings import BASELINE
+from aniso3d.bench.variants import (
+    as_good,
+    command,
+    corpus_parser,
+    delta,
+    pair,
+    print_scores,
+    publish,
+    run_corpus_demo,
+    scene_cameras,
+    scored,
+)
 from aniso3d.build import scenes
 from aniso3d.build.texture import build_texture
 from aniso3d.rendering.renderer import Renderer
@@ -58,49 +65,28 @@ def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
     rows = []
     saved = params.AA_SURFACE_REACH, params.AA_CLOSE_SIDED
     try:
-        for spec in corpus_cameras(mesh, (args.size, args.size), args.resolution):
-            truth = renderer.render(mesh, spec.camera, "mesh", ssaa=args.gt_ssaa)
-            row = {"scene": name, "camera": spec.label, "closed": closed}
-            for label, ssaa in (("1 spp", 1), ("2x2", 2)):
-                img = renderer.render(mesh, spec.camera, "mesh", ssaa=ssaa)
-                m = metrics.compare_in_box(truth, img, spec.crop, with_flip=True)
-                row[label] = (m["psnr"], m["flip"])
+        for spec, truth, row in scene_cameras(renderer, mesh, name, args):
+            row["closed"] = closed
             for label, (reach, closure) in VARIANTS.items():
                 params.AA_SURFACE_REACH = saved[0] if reach is None else reach
                 params.AA_CLOSE_SIDED = saved[1] if closure is None else closure
                 img = renderer.render(points, spec.camera, "splat", splat=BASELINE["splat"], quality="high")
-                m = metrics.compare_in_box(truth, img, spec.crop, with_flip=True)
-                row[label] = (m["psnr"], m["flip"])
+                row[label] = scored(truth, img, spec)
             rows.append(row)
-            print(f"  {spec.label}: " + ", ".join(f"{k} {v[0]:.2f}/{v[1]:.4f}" for k, v in row.items()
-                                                  if isinstance(v, tuple)), flush=True)  # fmt: skip
+            print_scores(spec.label, row)
     finally:
         params.AA_SURFACE_REACH, params.AA_CLOSE_SIDED = saved
     return rows
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("scenes", nargs="*", default=[*scenes.CORPUS, "cube", "sphere"])
-    ap.add_argument("--size", type=int, default=512)
-    ap.add_argument("--gt-ssaa", type=int, default=8)
-    ap.add_argument("--resolution", type=int, default=128)
-    ap.add_argument("--directions", type=int, default=16)
-    ap.add_argument("--md", default="", help="Markdown file to write the table into (between its markers)")
-    args = ap.parse_args()
-
-    run = run_scenes(args.scenes, args.size, lambda name, renderer: run_scene(name, args, renderer))
+    args = corpus_parser(__doc__.splitlines()[0], [*scenes.CORPUS, "cube", "sphere"]).parse_args()
+    run = run_corpus_demo(args, run_scene)
     columns = ["1 spp", "2x2", *VARIANTS]
-    table = []
-    for r in run.rows:
-        new, old = r["all"], r["before"]
-        beats = new[0] >= r["2x2"][0] and new[1] <= r["2x2"][1]
-        table.append([r["scene"], r["camera"], f"{100 * r['closed']:.0f} %",
-                      *(f"{r[c][0]:.2f} / {r[c][1]:.4f}" for c in columns),
-                      f"{new[0] - old[0]:+.2f}", f"{new[1] - old[1]:+.4f}", "yes" if beats else "no"])  # fmt: skip
-    parts = [
-        BEGIN,
-        run.header(f"demos/bench_splat_rim.py {' '.join(args.scenes)} --size {args.size}") + " "
+    table = [[r["scene"], r["camera"], f"{100 * r['closed']:.0f} %", *(pair(r[c]) for c in columns),
+              *delta(r["all"], r["before"]), as_good(r["all"], r["2x2"])] for r in run.rows]  # fmt: skip
+    publish([
+        run.header(command("demos/bench_splat_rim.py", args)) + " "
         f"Texture {args.resolution}^3, K = {args.directions}, the corpus bench's points and {BASELINE['splat']} "
         f"splats, quality \"high\"; truth {args.gt_ssaa}x{args.gt_ssaa} polygons; PSNR (dB) / FLIP inside the "
         "object's box, as the corpus bench. One-sided: the share of points on closed surfaces. before: the "
@@ -110,13 +96,7 @@ def main() -> None:
         "≥ 2x2: all at least as good as 2x2 polygons in PSNR and FLIP.",
         "",
         markdown_table(["scene", "camera", "one-sided", *columns, "Δ PSNR", "Δ FLIP", "≥ 2x2"], table),
-        END,
-    ]
-    block = "\n".join(parts)
-    print("\n" + block)
-    if args.md:
-        path = write_between_markers(args.md, block, BEGIN, END, title="# Anti-aliased splats\n\n")
-        print(f"wrote {path}")
+    ], args.md, BEGIN, END, title="# Anti-aliased splats\n\n")  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -19,14 +19,22 @@ pixel), both drawn by the volume renderer and compared with the polygons at
 
 from __future__ import annotations
 
-import argparse
-
 import numpy as np
 
 from aniso3d import metrics
 from aniso3d.bench.corpus import corpus_cameras
-from aniso3d.bench.outputs import markdown_table, write_between_markers
-from aniso3d.bench.run import run_scenes
+from aniso3d.bench.outputs import markdown_table
+from aniso3d.bench.variants import (
+    SUMMARY_HEAD,
+    command,
+    corpus_parser,
+    corpus_summary,
+    delta,
+    ms,
+    pair,
+    publish,
+    run_corpus_demo,
+)
 from aniso3d.build import scenes
 from aniso3d.build.texture import build_texture
 from aniso3d.rendering.renderer import Renderer
@@ -75,44 +83,18 @@ def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
     return rows
 
 
-def ms(times: list[float]) -> str:
-    t = 1000 * np.asarray(times)
-    return f"{np.median(t):.0f} [{t.min():.0f}-{t.max():.0f}]"
-
-
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("scenes", nargs="*", default=list(scenes.CORPUS))
-    ap.add_argument("--size", type=int, default=512)
-    ap.add_argument("--gt-ssaa", type=int, default=8)
-    ap.add_argument("--resolution", type=int, default=128)
-    ap.add_argument("--directions", type=int, default=16)
-    ap.add_argument("--frames", type=int, default=5)
-    ap.add_argument("--md", default="", help="Markdown file to write the table into (between its markers)")
-    args = ap.parse_args()
-
-    run = run_scenes(args.scenes, args.size, lambda name, renderer: run_scene(name, args, renderer))
+    args = corpus_parser(__doc__.splitlines()[0], scenes.CORPUS, frames=5).parse_args()
+    run = run_corpus_demo(args, run_scene)
     rows = run.rows
 
     table = []
     for r in rows:
         s, f = r["flat"], r["smooth"]
-        table.append([r["scene"], r["camera"], f"{r['voxel_px']:.2f}",
-                      f"{s['psnr']:.2f} / {s['flip']:.4f}", f"{f['psnr']:.2f} / {f['flip']:.4f}",
-                      f"{f['psnr'] - s['psnr']:+.2f}", f"{f['flip'] - s['flip']:+.4f}",
+        table.append([r["scene"], r["camera"], f"{r['voxel_px']:.2f}", pair(s), pair(f), *delta(f, s),
                       f"{s['inside_err']:.2f}", f"{f['inside_err']:.2f}", ms(s["times"]), ms(f["times"])])  # fmt: skip
-    summary = []
-    for cam in ("close", "minified"):
-        d = [r["smooth"]["psnr"] - r["flat"]["psnr"] for r in rows if r["camera"] == cam]
-        df = [r["smooth"]["flip"] - r["flat"]["flip"] for r in rows if r["camera"] == cam]
-        tr = [np.median(r["smooth"]["times"]) / np.median(r["flat"]["times"]) for r in rows if r["camera"] == cam]
-        if d:
-            summary.append([cam, f"{np.mean(d):+.2f}", f"{min(d):+.2f}", f"{max(d):+.2f}", f"{np.mean(df):+.4f}",
-                            f"{max(df):+.4f}", f"{np.median(tr):.2f} [{min(tr):.2f}-{max(tr):.2f}]"])  # fmt: skip
-    parts = [
-        BEGIN,
-        run.header(f"demos/bench_volume_shading.py {' '.join(args.scenes)} --size {args.size} "
-                   f"--frames {args.frames}") + " "
+    publish([
+        run.header(command("demos/bench_volume_shading.py", args, "--frames", str(args.frames))) + " "
         f"Texture {args.resolution}^3, K = {args.directions}; truth "
         f"{args.gt_ssaa}x{args.gt_ssaa} polygons; errors inside the object's box, as the corpus bench. "
         "The images are deterministic, so PSNR, FLIP and the inside error have no spread; frame times are "
@@ -129,15 +111,8 @@ def main() -> None:
         "**Over the corpus** (smooth - flat; PSNR dB: mean, worst, best; FLIP: mean, worst; frame "
         "time ratio smooth / flat: median [range] over the scenes):",
         "",
-        markdown_table(["camera", "mean Δ PSNR", "worst", "best", "mean Δ FLIP", "worst Δ FLIP", "time ratio"],
-                       summary),  # fmt: skip
-        END,
-    ]
-    block = "\n".join(parts)
-    print("\n" + block)
-    if args.md:
-        path = write_between_markers(args.md, block, BEGIN, END, title="# Volume shading\n\n")
-        print(f"wrote {path}")
+        markdown_table(SUMMARY_HEAD, corpus_summary(rows, "smooth", "flat")),
+    ], args.md, BEGIN, END, title="# Volume shading\n\n")  # fmt: skip
 
 
 if __name__ == "__main__":

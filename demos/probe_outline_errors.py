@@ -1,6 +1,7 @@
 """Where a scene's error comes from, per pixel: its outline or its inside,
 coverage or colour, for the polygons at 1 and 2 x 2 samples, the volume and
-quality "high" splats, at the corpus bench's two cameras.
+quality "high" splats (the points the renderer draws, ``texture_points``), at
+the corpus bench's two cameras.
 
 Against the polygons at 8 x 8 samples (inside the object's box, as the corpus
 bench measures), per renderer:
@@ -25,6 +26,7 @@ With ``--halfplanes off`` the volume draws no half-planes
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import numpy as np
 from scipy import ndimage
@@ -33,10 +35,12 @@ from aniso3d import metrics
 from aniso3d.bench.corpus import corpus_cameras
 from aniso3d.bench.settings import BASELINE
 from aniso3d.build import scenes
+from aniso3d.build.mesh import load_mesh
 from aniso3d.build.texture import build_texture
 from aniso3d.rendering import sheet_halfplanes
 from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.renderer import Renderer
+from aniso3d.rendering.splat.clips import texture_points
 
 
 def split(truth: np.ndarray, img: np.ndarray, background: np.ndarray) -> dict:
@@ -76,9 +80,9 @@ def main() -> None:
     with GLContext("auto") as gl, Renderer(size, gl=gl) as r:
         bg = 255.0 * np.asarray(r.lighting.background, dtype=np.float64)
         for name in args.scenes:
-            mesh = scenes.get_scene(name)
+            mesh = load_mesh(name) if Path(name).suffix else scenes.get_scene(name)
             tex = build_texture(mesh, args.resolution, args.directions)
-            points = tex.to_points(BASELINE["placement"], BASELINE["per_entry"], BASELINE["point_normal"])
+            points = texture_points(tex, BASELINE["placement"], BASELINE["per_entry"], BASELINE["point_normal"])
             for spec in corpus_cameras(mesh, size, args.resolution):
                 x0, y0, x1, y1 = spec.crop
                 imgs = {

@@ -215,13 +215,16 @@ float slice_of(float z) {
 // closed surface seen from outside, whose splats facing the eye are one
 // surface within a pixel or lie a solid's thickness apart) the change of the
 // fragment's depth across SURFACE_REACH pixels where the ray meets the
-// splat's plane, at most the depth of its bounding sphere (reachz). h, sw,
+// splat's plane, at most the depth of its bounding sphere (reachz); the
+// same for a two-sided surface sheet's where that change is graze at least
+// (a sheet grazing the ray; splat_surfaces.frag chains its slices). h, sw,
 // hit as in main().
 float surface_reach(vec3 h, float sw, bool hit) {
     if (!hit || fs_in.reachz <= 0.0) return 0.0;
     // d (t - t0) / d pixel, t - t0 = sw / h.z (rows over pixels: splat.vert).
     vec2 g = -(fs_in.hc.yz + (sw / h.z) * fs_in.hw.yz) / h.z;
-    return min(length(g) * fs_in.lmap.y * SURFACE_REACH, fs_in.reachz);
+    float r = min(length(g) * fs_in.lmap.y * SURFACE_REACH, fs_in.reachz);
+    return r < fs_in.graze ? 0.0 : r;  // a two-sided sheet reaches where it grazes the ray
 }
 
 // Mark the slice holding slice coordinate u in this pixel's mask (a plain

@@ -7,7 +7,9 @@
 //   the point's coherence, see lighting.glsl),
 //   in_size = sqrt(area) (world units), negated for a one-sided point (a
 //   piece of a closed surface, its normal pointing out: culled where it faces
-//   away from the eye), in_kd (RGB), in_spec = (ks, shininess).
+//   away from the eye), in_kd (RGB), in_spec = (ks, shininess), the sign bit
+//   of ks set for a point of a surface sheet (aniso3d.build.points.PointCloud.sheet:
+//   with AA and SHEET_REACH its surface reaches as a one-sided point's does).
 //   A point with clip planes has in_spec.y negated (its sign bit set):
 //   quality "high" skips it here and draws it from the cloud's cut upload,
 //   with CLIPS: its two clip planes from u_clip_table (see clip_inputs()).
@@ -75,11 +77,16 @@ uniform float u_push;        // visibility push-back, in units of the larger hal
 uniform bool u_one_sided;    // cull one-sided points seen from behind (the eye is outside the cloud)
 #ifdef AA
 #include "splat_filter.glsl"
+#ifndef SHEET_REACH  // aniso3d/rendering/splat/params.py (AA_SHEET_REACH, AA_SHEET_GRAZE)
+#define SHEET_REACH 1
+#define SHEET_GRAZE 3.0
+#endif
 uniform float u_size_factor; // the shape's linear scale over its true area's
 uniform vec2 u_regime;       // sqrt(true projected area) in pixels: box formula below x, exact shape above y
 uniform float u_range;       // far - near
 uniform vec2 u_srange;       // (near - t0, far - t0): the range of t - t0
 uniform vec2 u_slices;       // (lo, scale): slice coordinate (z - lo) scale of a linear depth z
+uniform float u_span;        // the depth one surface spans, slices
 #if PASS == 2
 #include "lighting.glsl"
 #endif
@@ -246,8 +253,10 @@ void main() {
         return;
     }
 #endif
-    vec2 spec = vec2(in_spec.x, abs(in_spec.y));
     vec3 n = normalize(in_normal);  // its length is the point's coherence
+    // ks's sign bit marks a point of a surface sheet (also on ks = -0.0).
+    bool sheet = (floatBitsToUint(in_spec.x) & 0x80000000u) != 0u;
+    vec2 spec = vec2(abs(in_spec.x), abs(in_spec.y));
     vec3 helper = abs(n.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0);
     vec3 t = normalize(cross(n, helper));
     vec3 b = cross(n, t);
@@ -438,7 +447,13 @@ void main() {
     vs_out.lmap = vec4(u_depth.y / u_range, 1.0 / u_range, u_slices);
     vs_out.pushz = push / u_range;
     vs_out.sided = u_one_sided && in_size < 0.0 ? 2.0 : 1.0;
-    vs_out.reachz = vs_out.sided > 1.5 ? vs_out.zrange.y - vs_out.zrange.x : 0.0;
+    // A closed surface's splat, or a surface sheet's (SHEET_REACH), may
+    // extend its pixel's nearest surface (splat.frag, surface_reach); a
+    // two-sided sheet's only where it grazes the ray, its depth changing
+    // across the reach by SHEET_GRAZE spans at least.
+    bool sheet_reach = SHEET_REACH != 0 && sheet && vs_out.sided < 1.5;
+    vs_out.reachz = vs_out.sided > 1.5 || sheet_reach ? vs_out.zrange.y - vs_out.zrange.x : 0.0;
+    vs_out.graze = sheet_reach ? SHEET_GRAZE * u_span / u_slices.y : 0.0;
     // The clip planes' lines; a sub-pixel box cut by them keeps its true
     // area (all of it lies on their kept side): its amplitude grows by the
     // share cut off (at most 4: the kept sides hold its centre).

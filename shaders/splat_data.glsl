@@ -30,12 +30,14 @@
 // times the splat's coverage counts in its pixel's coverage sum (sided: 2 for
 // a one-sided splat whose back is culled, else 1), the most a fragment's
 // depth change across its pixel may extend its surface (reachz, linear
-// depth: 0 but for a one-sided splat whose back is culled; splat.frag,
-// surface_reach), and its clip planes' lines in the image (cut0, cut1: rows
+// depth: 0 but for a one-sided splat whose back is culled and a surface
+// sheet's; splat.frag,
+// surface_reach), the least of that a two-sided sheet's fragment must reach
+// to count (graze, linear depth: 0 for any other splat), and its clip planes' lines in the image (cut0, cut1: rows
 // over the pixel offsets from org, positive on the kept side; (1, 0, 0):
 // none).
-#define SPLAT_COVERAGE flat vec2 cpx; flat vec3 box; flat float regime; flat vec2 zrange; flat vec3 rgb; flat vec4 clip; flat vec2 org; flat vec2 srange; flat vec4 lmap; flat float pushz; flat float sided; flat float reachz; flat vec3 cut0; flat vec3 cut1;
-#define SPLAT_COPY_COVERAGE(d, s) d.cpx = s.cpx; d.box = s.box; d.regime = s.regime; d.zrange = s.zrange; d.rgb = s.rgb; d.clip = s.clip; d.org = s.org; d.srange = s.srange; d.lmap = s.lmap; d.pushz = s.pushz; d.sided = s.sided; d.reachz = s.reachz; d.cut0 = s.cut0; d.cut1 = s.cut1;
+#define SPLAT_COVERAGE flat vec2 cpx; flat vec3 box; flat float regime; flat vec2 zrange; flat vec3 rgb; flat vec4 clip; flat vec2 org; flat vec2 srange; flat vec4 lmap; flat float pushz; flat float sided; flat float reachz; flat float graze; flat vec3 cut0; flat vec3 cut1;
+#define SPLAT_COPY_COVERAGE(d, s) d.cpx = s.cpx; d.box = s.box; d.regime = s.regime; d.zrange = s.zrange; d.rgb = s.rgb; d.clip = s.clip; d.org = s.org; d.srange = s.srange; d.lmap = s.lmap; d.pushz = s.pushz; d.sided = s.sided; d.reachz = s.reachz; d.graze = s.graze; d.cut0 = s.cut0; d.cut1 = s.cut1;
 #else
 #define SPLAT_COVERAGE
 #define SPLAT_COPY_COVERAGE(d, s)

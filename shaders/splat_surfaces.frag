@@ -9,9 +9,11 @@
 // surface_reach), and u_slices, the slices' (lo, scale).
 // The pixel's surfaces, front to back: the nearest occupied slice starts one,
 // which takes every occupied slice less than u_span beyond its start (the
-// nearest surface: beyond the reach's slice if that lies farther); the
-// next occupied slice starts the next (aniso3d/rendering/splat/reference.py
-// is the NumPy twin).
+// nearest surface: beyond the reach's slice if that lies farther, where the
+// pixel holds no closed surface seen from outside, u_visible's blue 1, only
+// as far as its occupied slices are chained, each less than CHAIN u_span
+// beyond the one before); the next occupied slice starts the next
+// (aniso3d/rendering/splat/reference.py is the NumPy twin).
 // Out: f_surfaces, the first slices of surfaces 1 .. LAYERS - 1, 16 bits
 // each in x, y and z (0xFFFF where there is no such surface; LAYERS <= 7),
 // the first slice of surface 0 (the nearest) in the low half of w, and the
@@ -24,12 +26,15 @@
 #ifndef WORDS
 #define WORDS 16
 #endif
+#ifndef CHAIN  // aniso3d/rendering/splat/params.py (AA_SHEET_CHAIN)
+#define CHAIN 1.5
+#endif
 #if LAYERS > 7
 #error at most 7 layers (their starts and surface 0's share 128 bits)
 #endif
 
 layout(r32ui) uniform uimage2DArray u_mask;
-uniform sampler2D u_visible;  // (pushed depth, 0, 0, coverage sum) of the visibility pass
+uniform sampler2D u_visible;  // (pushed depth, least reach, 0 if one-sided else 1, coverage sum) of the visibility pass
 uniform float u_span;
 uniform vec2 u_slices;  // (lo, scale): slice coordinate (z - lo) scale of a linear depth z
 
@@ -44,26 +49,42 @@ void main() {
     uint count = 0u;
     float limit = -1.0;  // the current surface takes the slices below this
     int last = 0;        // the last surface's first slice
+    // Chained (the nearest surface, where the pixel holds no closed surface
+    // seen from outside, blue 1): each slice it takes extends it to CHAIN
+    // spans beyond, up to end.
+    bool chain = false;
+    float end = 0.0;
     for (int k = 0; k < WORDS; ++k) {
         uint w = imageLoad(u_mask, ivec3(px, k)).r;
         if (w == 0u) continue;
         imageStore(u_mask, ivec3(px, k), uvec4(0u));
-        // Drop the slices the current surface still takes.
-        float skip = limit - float(32 * k);
-        if (skip <= 31.0) {
-            if (skip > 0.0) w &= ~((1u << uint(ceil(skip))) - 1u);
-            while (w != 0u) {
+        while (w != 0u) {
+            if (chain) {
                 int s = 32 * k + findLSB(w);
-                if (count == 0u) starts[6] = uint(s);
-                if (count >= 1u && count < uint(LAYERS)) starts[count - 1u] = uint(s);
-                last = s;
-                count += 1u;
-                limit = float(s) + u_span;
-                if (count == 1u) limit = max(float(s), floor((visible.g - u_slices.x) * u_slices.y)) + u_span;
-                skip = limit - float(32 * k);
-                if (skip > 31.0) break;
-                w &= ~((1u << uint(ceil(skip))) - 1u);
+                if (float(s) < limit) {
+                    limit = max(limit, min(float(s) + CHAIN * u_span, end));
+                    w &= w - 1u;
+                    continue;
+                }
+                chain = false;
             }
+            // Drop the slices the current surface still takes.
+            float skip = limit - float(32 * k);
+            if (skip > 31.0) break;
+            if (skip > 0.0) w &= ~((1u << uint(ceil(skip))) - 1u);
+            if (w == 0u) break;
+            int s = 32 * k + findLSB(w);
+            if (count == 0u) starts[6] = uint(s);
+            if (count >= 1u && count < uint(LAYERS)) starts[count - 1u] = uint(s);
+            last = s;
+            count += 1u;
+            limit = float(s) + u_span;
+            if (count == 1u) {
+                end = max(float(s), floor((visible.g - u_slices.x) * u_slices.y)) + u_span;
+                chain = visible.b > 0.5 && end > limit;
+                limit = chain ? max(limit, min(float(s) + CHAIN * u_span, end)) : end;
+            }
+            w &= w - 1u;
         }
     }
     f_cover = vec2(visible.a, float(last));

@@ -42,9 +42,11 @@
 //                half2(fill, static share), half2(sheet area, crossing
 //                slack), its edges (render/sheet_edges.py:edge_words: a
 //                halo, area 0, has its edge's face in bits 8-10; bit 31 set:
-//                a half-plane, render/sheet_halfplanes.py:halfplane_words); the rest
+//                a half-plane, render/sheet_halfplanes.py:halfplane_words; bits 31
+//                and 3: a strip, render/sheet_strips.py:strip_words); the rest
 //                of its linear model across its plane as half2 pairs (S22,
-//                dkd/du, dkd/dv: render/sheet_slopes.py, smooth_sheet()) and
+//                dkd/du, dkd/dv: render/sheet_slopes.py, smooth_sheet(); a
+//                strip has none: word 12 is its far line's offset, float bits) and
 //                sigma, the entry's closed (outward) vector area over its
 //                area times normal (render/volume.py:closed_sign)
 //   5 dirs[]     vec4, the K sample directions N_p (xyz)
@@ -70,7 +72,8 @@ vec3 g_light_dir[4];
 // termination; T_MIN_PLAIN in the plain marching), BIG (stands for an
 // infinite ray parameter), RUN_SHARE, RUN_GAP, RUN_PARALLEL, RUN_STEEP and RUN_GRAZE
 // (the runs of surface sheets: render/volume.py:sheet_terms), HALF_C_RANGE
-// and HALF_PIXELS (half-planes: render/sheet_halfplanes.py).
+// and HALF_PIXELS (half-planes: render/sheet_halfplanes.py), STRIP_PIXELS
+// (strips: render/sheet_strips.py).
 
 uniform vec2 u_size;
 uniform vec3 u_forward;
@@ -326,16 +329,13 @@ float edge_angle(uint code) {
     return float(code) * (6.283185307179586 / 256.0) - 3.141592653589793;
 }
 
-// Share of the pixel's footprint on the covered side of a half-plane's
-// line (entry word 11 `w`: bits 11-18 the angle theta of its inward normal
-// u in the tangent frame of nh, bits 19-30 its offset c) where the ray
-// crosses the sheet's plane nh.x = d at p: (p - q0).u - c from the line in
-// the plane (q0 the plane's point nearest the voxel's centre), times
+// Share of the pixel's footprint on the covered side of a line (its inward
+// normal u at angle theta in the tangent frame of nh, offset c) where the
+// ray crosses the sheet's plane nh.x = d at p: (p - q0).u - c from the line
+// in the plane (q0 the plane's point nearest the voxel's centre), times
 // |n.w| / sqrt(1 - (t.w)^2) seen along the ray (t = n x u): a ramp over the
 // footprint, 1/2 on the line. Mirrors render/sheet_halfplanes.py:halfplane_ramp.
-float halfplane_ramp(uint w, vec3 p, vec3 nh, float nw, float d, float foot) {
-    float theta = edge_angle((w >> 11u) & 255u);
-    float c = (float((w >> 19u) & 4095u) / 4095.0 * 2.0 - 1.0) * HALF_C_RANGE;
+float line_ramp(float theta, float c, vec3 p, vec3 nh, float nw, float d, float foot) {
     vec3 t1 = normalize(cross(nh, abs(nh.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0)));
     vec3 t2 = cross(nh, t1);
     vec3 u = cos(theta) * t1 + sin(theta) * t2;
@@ -343,6 +343,23 @@ float halfplane_ramp(uint w, vec3 p, vec3 nh, float nw, float d, float foot) {
     float tw = dot(cross(nh, u), g_d);
     float dist = e * abs(nw) / sqrt(max(1.0 - tw * tw, 1e-12));
     return clamp(0.5 + dist / max(foot, 1e-12), 0.0, 1.0);
+}
+
+// The same for a half-plane's line (entry word 11 `w`: bits 11-18 theta,
+// bits 19-30 c).
+float halfplane_ramp(uint w, vec3 p, vec3 nh, float nw, float d, float foot) {
+    float c = (float((w >> 19u) & 4095u) / 4095.0 * 2.0 - 1.0) * HALF_C_RANGE;
+    return line_ramp(edge_angle((w >> 11u) & 255u), c, p, nh, nw, d, foot);
+}
+
+// Share of the pixel's footprint between a strip's lines (the half-plane's
+// of word 11 and the far one at offset `far`, word 12; infinite: none): the
+// near line's ramp less the far one's. Mirrors
+// render/sheet_strips.py:strip_cover.
+float strip_cover(uint w, float far, vec3 p, vec3 nh, float nw, float d, float foot) {
+    float near = halfplane_ramp(w, p, nh, nw, d, foot);
+    if (isinf(far)) return near;
+    return clamp(near - line_ramp(edge_angle((w >> 11u) & 255u), far, p, nh, nw, d, foot), 0.0, 1.0);
 }
 
 // The shaded colour of sheet e (unit normal nh, of length len_n stored:
@@ -481,7 +498,11 @@ void composite(int v, vec3 x_in, float t0, float chord) {
             // A half-plane (render/sheet_halfplanes.py): a surface sheet
             // with an edge inside the voxel, where the footprint is filtered
             // and the voxel spans HALF_PIXELS or more.
-            bool hp = (sh.w >> 31u) == 1u && u_opacity_mode == 3 && foot > 0.0 && pixels >= HALF_PIXELS;
+            // A strip (render/sheet_strips.py): a closed surface's partial
+            // sheet between two lines (or one), drawn from STRIP_PIXELS on.
+            bool strip = (sh.w >> 31u) == 1u && (sh.w & 8u) != 0u;
+            bool hp = (sh.w >> 31u) == 1u && u_opacity_mode == 3 && foot > 0.0
+                      && pixels >= (strip ? STRIP_PIXELS : HALF_PIXELS);
             float share = hp ? 1.0 : 1.0 - (1.0 - fill_share.y) * (1.0 - zoom);
             // (A surface sheet keeps its runs' near and far sides.)
             float sv = fill_share.y >= RUN_SHARE ? 1.0 : vis;
@@ -595,7 +616,9 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                     ws = fill;
                     if (hp) {
                         vec3 p = x_in + g_d * (nw != 0.0 ? -s_in / nw : 0.0);
-                        ws *= halfplane_ramp(sh.w, p, nh, nw, uintBitsToFloat(sh.x), foot);
+                        ws *= strip ? strip_cover(sh.w, uintBitsToFloat(ENT(4u * e + 3u).x), p, nh, nw,
+                                                  uintBitsToFloat(sh.x), foot * STRIP_FOOT)
+                                    : halfplane_ramp(sh.w, p, nh, nw, uintBitsToFloat(sh.x), foot);
                     }
                     t_cross += ws * th;
                 }

@@ -40,3 +40,18 @@ def pytest_addoption(parser):
 @pytest.fixture
 def regen_references(request) -> bool:
     return bool(request.config.getoption("--regen-references"))
+
+
+def build_open(mesh, *args, **kwargs):
+    """``build_texture`` with every face taken as open: the registration's
+    exact sums (areas and densities conserved), which tests of accounting
+    (points, levels of detail) check. A closed skin's hidden backs, which
+    take those sums apart on purpose, are tests/test_thin_solids.py's."""
+    import numpy as np
+
+    import aniso3d.build.mesh_stream as mesh_stream
+    from aniso3d import build_texture
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(mesh_stream, "face_topology", lambda v, f: (np.zeros(len(f), np.int8), np.zeros(len(f), bool)))
+        return build_texture(mesh, *args, **kwargs)

@@ -22,7 +22,6 @@ import signal
 import struct
 import subprocess
 import sys
-import time
 import zipfile
 from pathlib import Path
 
@@ -328,8 +327,8 @@ def test_no_command_and_unknown_command(capsys):
 
 def test_build_that_cannot_fit_is_refused_up_front(tmp_path, capsys, monkeypatch):
     # 1 GiB available and K = 4096 on the default tree at 256^3: the
-    # density spheres alone are several GiB. Refused after loading, in well
-    # under a second of work, with the estimate and what to lower.
+    # density spheres alone are several GiB. Refused after loading, before
+    # any clipping (must_not_clip), with the estimate and what to lower.
     monkeypatch.setattr(aniso3d.build.texture, "_available_memory", lambda: 2**30)
 
     def must_not_clip(*a, **k):
@@ -337,9 +336,8 @@ def test_build_that_cannot_fit_is_refused_up_front(tmp_path, capsys, monkeypatch
 
     monkeypatch.setattr(aniso3d.build.stream, "clip_to_grid", must_not_clip)
     out = tmp_path / "tree.a3d"
-    t0 = time.perf_counter()
     code, stdout, err = run(["build", "-o", out, "-r", 256, "-k", 4096, "-q"], capsys)
-    assert code == 2 and time.perf_counter() - t0 < 10
+    assert code == 2
     line = one_line_error(
         err,
         "build",

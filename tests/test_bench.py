@@ -392,3 +392,24 @@ def test_write_between_markers_keeps_the_prose(tmp_path):
     assert page.read_text() == "intro\n" + block + "\noutro\n"
     assert "| a | b |\n|---|---|\n| 1 | 2 |" in block
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def test_variant_demo_cells_and_summary():
+    """The corpus demos' shared cells (aniso3d.bench.variants): scores as
+    "PSNR / FLIP", changes signed, "as good" in both metrics, and the
+    per-camera summary over scenes."""
+    from aniso3d.bench.variants import as_good, corpus_summary, delta, ms, pair
+
+    assert pair((30.123, 0.01234)) == "30.12 / 0.0123" == pair({"psnr": 30.123, "flip": 0.01234})
+    assert delta((31.0, 0.010), (30.5, 0.012)) == ["+0.50", "-0.0020"]
+    assert as_good((31.0, 0.010), (30.5, 0.012)) == "yes"
+    assert as_good((31.0, 0.013), (30.5, 0.012)) == "no"  # better PSNR, worse FLIP
+    assert ms([0.010, 0.030, 0.020]) == "20 [10-30]"
+    rows = [
+        {"camera": "close", "new": {"psnr": 31, "flip": 0.01, "times": [2, 2]},
+         "old": {"psnr": 30, "flip": 0.02, "times": [1, 1]}},
+        {"camera": "close", "new": {"psnr": 29, "flip": 0.04, "times": [3]},
+         "old": {"psnr": 30, "flip": 0.02, "times": [1]}},
+    ]  # fmt: skip
+    (close,) = corpus_summary(rows, "new", "old")  # no minified rows: no minified line
+    assert close == ["close", "+0.00", "-1.00", "+1.00", "+0.0050", "+0.0200", "2.50 [2.00-3.00]"]

@@ -336,9 +336,12 @@ def assert_within_bounds(tex: AnisoTexture, got: AnisoTexture, bits: Bits = DEFA
     d_err = np.abs(got.density - tex.density)
     if bits.density:
         assert np.all(d_err <= A_v[:, None] / (2 * (2**bits.density - 1)) + f_err + 1e-9)
-    # D >= F always: what the volume renderer's residual reading relies on
+    # D >= F where no thin solid's back is hidden (D is below F there by
+    # what the front hides, aniso3d.build.closure): what the volume
+    # renderer's residual reading relies on
     f2 = facet_density(a2, n2, got.entry_offsets, dirs)
-    assert np.all(got.density >= f2 - 1e-12)
+    whole = np.bincount(got.entry_voxel, weights=got.entry_cover < 1, minlength=got.n_voxels) == 0
+    assert np.all(got.density[whole] >= f2[whole] - 1e-12)
     assert got.total_area() == pytest.approx(tex.total_area(), rel=2 ** (step / 2) - 1)
 
 
@@ -380,8 +383,11 @@ def test_more_bits_cost_more_bytes_and_err_less(tree_tex, tmp_path):
 
 def test_derived_density_is_the_facet_density_and_exact_for_flat_entries(tree_tex):
     got = tree_tex.as_stored(Bits(density=0))
-    f2 = facet_density(got.entry_area, got.entry_normal, got.entry_offsets, got.directions)
-    np.testing.assert_array_equal(got.density, f2)
+    # (the entries' covered areas: the branches' backs hide behind their fronts)
+    assert (got.entry_cover < 1).any()
+    f2 = facet_density(got.entry_area * got.entry_cover, got.entry_normal, got.entry_offsets, got.directions)
+    # (covers are float32: their products round at float32's 6e-8)
+    np.testing.assert_allclose(got.density, f2, rtol=2e-7, atol=1e-15)
     # a quad: one flat facet per voxel, so D = F up to the entries' quantisation
     quad = build_texture(scenes.quad(), 16, 16)
     q = quad.as_stored(Bits(density=0))

@@ -877,7 +877,8 @@ def test_scene_at_1e7_renders_like_at_the_origin(gpu, method):
         if method == "volume":
             b = replace(tex, origin=tex.origin + far, entry_centroid=tex.entry_centroid + far)
         else:
-            b = PointCloud(a.positions + far, a.normals, a.areas, a.kd, a.ks, a.shininess)
+            b = PointCloud(a.positions + far, a.normals, a.areas, a.kd, a.ks, a.shininess,
+                           coherence=a.coherence, one_sided=a.one_sided, clips=a.clips)  # fmt: skip
     ia = draw(gpu["default"], a, c0, method)
     ib = draw(gpu["default"], b, c1, method)
     assert (ia[:, :, 3] > 0).mean() > 0.08

@@ -21,7 +21,7 @@ from aniso3d.grid import tangent_frame
 from aniso3d.rendering.camera import Camera
 from aniso3d.rendering.sheet_halfplanes import (
     HALF_TOLERANCE,
-    _clipped,
+    clipped_piece,
     fit_halfplanes,
     halfplane_ramp,
     section_polygons,
@@ -60,7 +60,7 @@ def test_section_polygons_have_the_closed_form_area():
     planes, and the hexagon x + y + z = 3/2 has its 6 corners."""
     n, d = random_planes(500)
     uv, real, _ = section_polygons(n, d)
-    area, _, _ = _clipped(uv[..., 0], uv[..., 1], np.tile([1.0, 0.0], (500, 1)), np.full(500, -9.0))
+    area, _, _ = clipped_piece(uv[..., 0], uv[..., 1], np.tile([1.0, 0.0], (500, 1)), np.full(500, -9.0))
     np.testing.assert_allclose(area, plane_section_area(n, d), atol=1e-12)
     _, real, _ = section_polygons(np.full((1, 3), 3**-0.5), np.array([1.5 * 3**-0.5]))
     assert real.sum() == 6
@@ -77,7 +77,7 @@ def test_clipped_area_and_centroid_against_sampling(seed):
     u = np.array([[np.cos(th), np.sin(th)]])
     c = rng.uniform(-0.2, 0.2, 1)
     uv, _, _ = section_polygons(n, d)
-    area, cent, _ = _clipped(uv[..., 0], uv[..., 1], u, c)
+    area, cent, _ = clipped_piece(uv[..., 0], uv[..., 1], u, c)
     pts, cell = section_samples(n[0], d[0])
     side = pts[pts @ u[0] >= c[0]]
     assert abs(area[0] - len(side) * cell) < 0.01 * area[0]
@@ -98,7 +98,7 @@ def test_fit_recovers_a_half_plane():
     uv, _, frame = section_polygons(n, d)
     s = np.einsum("nek,nk->ne", uv, u)
     c = s.min(1) + (s.max(1) - s.min(1)) * rng.uniform(0.2, 0.8, N)
-    area, cent, _ = _clipped(uv[..., 0], uv[..., 1], u, c)
+    area, cent, _ = clipped_piece(uv[..., 0], uv[..., 1], u, c)
     q0 = 0.5 - (n.sum(1) * 0.5 - d)[:, None] * n
     centroid = q0 + cent[:, :1] * frame[:, 0] + cent[:, 1:] * frame[:, 1]
     th_fit, c_fit, residual, _, _ = fit_halfplanes(n, d, area, centroid)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import aniso3d
-import aniso3d.build.mesh as mesh_module
+import aniso3d.build.mesh_stream as mesh_stream
 from aniso3d import AnisoTexture, Mesh, build_texture, scenes
 from aniso3d.bench.corpus import corpus_cameras
 from aniso3d.build.closure import hidden_sides, voxel_net
@@ -35,9 +35,19 @@ def test_closed_faces_of_small_meshes():
     # corners split along seams (every face its own three vertices): still closed
     soup = Mesh.from_arrays(cube.triangles.reshape(-1, 3), np.arange(36).reshape(12, 3))
     np.testing.assert_array_equal(soup.closed_sides(), 1)
-    # a degenerate face is not closed
+    # ... and corners written with float noise (an exporter's rounding)
+    noise = np.random.default_rng(1).normal(scale=1e-9, size=(36, 3))
+    noisy = Mesh.from_arrays(cube.triangles.reshape(-1, 3) + noise, np.arange(36).reshape(12, 3))
+    np.testing.assert_array_equal(noisy.closed_sides(), 1)
+    # a degenerate face is not closed, and leaves the rest closed (a sphere's
+    # poles written as triangles with two corners at the pole)
     degenerate = Mesh.from_arrays(cube.vertices, np.vstack([cube.faces, [[0, 0, 1]]]))
-    assert not degenerate.closed_faces()[-1]
+    np.testing.assert_array_equal(degenerate.closed_sides(), [1] * 12 + [0])
+    # drawn double-sided (every face again, wound the other way): the first
+    # copy is the closed skin, the second repeats it
+    twice = Mesh.from_arrays(cube.vertices, np.vstack([cube.faces, cube.faces[:, ::-1]]))
+    np.testing.assert_array_equal(twice.closed_sides(), [1] * 12 + [0] * 12)
+    np.testing.assert_array_equal(twice.repeated_faces(), [False] * 12 + [True] * 12)
     # wound inwards: -1; two cubes apart, one each way, and an open quad
     inward = Mesh.from_arrays(cube.vertices, cube.faces[:, ::-1])
     np.testing.assert_array_equal(inward.closed_sides(), -1)
@@ -45,6 +55,13 @@ def test_closed_faces_of_small_meshes():
     shifted[0, 3] = 3.0
     both = concatenate([cube, inward.transformed(shifted), quad.transformed(-shifted)])
     np.testing.assert_array_equal(both.closed_sides(), [1] * 12 + [-1] * 12 + [0] * quad.n_faces)
+    # a sphere with a small hole (one triangle of 5120 missing) is a closed
+    # skin with a hole; a bowl (its lower half) is open
+    sphere = scenes.sphere()
+    np.testing.assert_array_equal(Mesh.from_arrays(sphere.vertices, sphere.faces[1:]).closed_sides(), 1)
+    z = sphere.triangles[:, :, 2].mean(axis=1)
+    bowl = Mesh.from_arrays(sphere.vertices, sphere.faces[z < np.median(z)])
+    assert not bowl.closed_faces().any()
     # a tube open at both ends (a cube without its top and bottom) is open
     z = cube.vertices[cube.faces][:, :, 2]
     tube = Mesh.from_arrays(cube.vertices, cube.faces[~np.all(z == z[:, :1], axis=1)])
@@ -146,7 +163,8 @@ def test_a_lattice_of_closed_beams_minified_covers_about_what_its_mesh_does(latt
     one-sided splats, +17 % in the volume); counting the beams' backs (faces
     not taken as closed) over-covers by 27 % in both (measured)."""
     mesh, tex = lattice
-    monkeypatch.setattr(mesh_module.Mesh, "closed_sides", lambda self: np.zeros(self.n_faces, np.int8))
+    monkeypatch.setattr(mesh_stream, "face_topology",
+                        lambda v, f: (np.zeros(len(f), np.int8), np.zeros(len(f), bool)))  # fmt: skip
     raw = build_texture(mesh, 48, 16)
     monkeypatch.undo()
     assert np.all(raw.entry_cover == 1.0) and tex.entry_cover.min() < 0.6

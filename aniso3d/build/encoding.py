@@ -1198,6 +1198,10 @@ def encode(arrays: dict[str, np.ndarray], voxel_size: float, bits: Bits = DEFAUL
         # codes then start ``zero`` steps below 0 (version 4; 0 otherwise).
         top = 2**bits.density - 1
         hidden = bool(np.any(np.asarray(arrays["entry_cover"]) < 1.0))
+        # A voxel whose decoded covers hide nothing keeps D >= F, as without hiding.
+        covered = _decode_cover(cover_codes, bits.cover) < 1.0
+        whole = np.bincount(voxel, weights=covered, minlength=len(coords)) == 0
+        residual = np.where(whole[:, None], np.maximum(residual, 0.0), residual)
         low = float(np.min(residual / scale, initial=0.0)) if hidden else 0.0
         zero = min(int(math.ceil(-low * top - 0.5)), top - 1) if low < 0 else 0
         codes = _encode_unit(residual / scale + zero / top, bits.density, 1.0)

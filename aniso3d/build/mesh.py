@@ -25,6 +25,17 @@ DEFAULT_KD = (0.7, 0.7, 0.7)
 DEFAULT_KS = 0.1
 #: Phong exponent where the material does not give one.
 DEFAULT_SHININESS = 16.0
+#: Vertices closer than this share of a mesh's extent are one position when
+#: its topology is read (:func:`face_topology`): float noise of exporters is
+#: far below it, any detail a texture resolves far above.
+MERGE_SHARE = 2.0**-20
+#: A consistently wound surface is taken as closed while its holes are small:
+#: the squared length of its open edges at most this share of its area (0:
+#: watertight only). A sphere with a hole of 23 degrees' radius (4 % of its
+#: area) or a head with open eye sockets passes; a bowl (pi), a box without
+#: its lid (3.2), a leaf (16) or a tube open at both ends shorter than 50
+#: times its radius (8 pi r / length) does not.
+HOLE_SHARE = 0.5
 #: Largest Phong exponent accepted; higher ones are clamped (a mirror-like lobe
 #: narrower than this is below a pixel at any size we render).
 MAX_SHININESS = 1.0e4
@@ -134,6 +145,11 @@ class Mesh:
         """(F,) int8: :func:`closed_sides`, +1 or -1 (outward or inward
         winding) on closed surfaces, 0 elsewhere."""
         return closed_sides(self.vertices, self.faces)
+
+    def repeated_faces(self) -> np.ndarray:
+        """(F,) bool: faces with the corners of an earlier face
+        (:func:`face_topology`), which a texture counts once."""
+        return repeated_faces(self.vertices, self.faces)
 
     @property
     def nbytes(self) -> int:
@@ -436,21 +452,77 @@ def closed_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 def closed_sides(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(F,) int8: +1 for a face of a closed surface wound outwards, -1 for
-    one wound inwards, 0 for a face of an open surface.
+    one wound inwards, 0 for a face of an open surface: the sides of
+    :func:`face_topology`."""
+    return face_topology(vertices, faces)[0]
 
-    A closed surface is a component of faces joined by shared edges
-    (vertices matched by position) in which every edge is shared by exactly
-    two faces walking it opposite ways: a watertight, consistently wound
-    skin. Its orientation is the sign of its signed volume. Degenerate faces
-    (a repeated corner) and components enclosing no volume are open."""
+
+def repeated_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F,) bool: faces that repeat an earlier face: the repeats of :func:`face_topology`."""
+    return face_topology(vertices, faces)[1]
+
+
+def merged_vertices(vertices: np.ndarray) -> np.ndarray:
+    """(V,) int64: one id per position, vertices within :data:`MERGE_SHARE`
+    of the mesh's extent of each other sharing it (rounded to that grid; a
+    share of 0: equal positions only)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    if len(v) == 0:
+        return np.zeros(0, dtype=np.int64)
+    lo = v.min(axis=0)
+    step = float(np.ptp(v, axis=0).max()) * MERGE_SHARE
+    if MERGE_SHARE <= 0.0:
+        _, same = np.unique(v, axis=0, return_inverse=True)
+    elif not step > 0.0:  # every vertex at one point
+        return np.zeros(len(v), dtype=np.int64)
+    else:
+        _, same = np.unique(np.round((v - lo) / step).astype(np.int64), axis=0, return_inverse=True)
+    return same.reshape(-1).astype(np.int64)
+
+
+def face_topology(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(sides, repeat)``: (F,) int8 +1 for a face of a closed surface wound
+    outwards, -1 for one wound inwards, 0 for a face of an open surface; and
+    (F,) bool for a face that repeats an earlier one.
+
+    Vertices are matched by position (:func:`merged_vertices`: meshes split
+    them along seams, and exporters write one corner with float noise). A
+    face with the corners of an earlier one, in either winding, repeats it:
+    meshes drawn double-sided carry every face twice, once each way, and a
+    texture that counted both would cover a thin part twice over (the
+    polygons' depth test keeps one). Repeats and degenerate faces (a
+    repeated corner) take no part in the topology and are open.
+
+    A closed surface is a component of the other faces, joined by edges
+    that two faces walk opposite ways (a consistently wound skin), whose
+    holes are small (:data:`HOLE_SHARE`: scans and modelled heads have a few;
+    only its faces beside an edge shared by three faces or more, or walked
+    the same way twice, are open). Its orientation is the sign of its signed
+    volume; components enclosing no volume are open."""
     faces = np.asarray(faces, dtype=np.int64)
     nf = len(faces)
+    sides = np.zeros(nf, dtype=np.int8)
+    repeat = np.zeros(nf, dtype=bool)
     if nf == 0:
-        return np.zeros(0, dtype=np.int8)
+        return sides, repeat
     v = np.asarray(vertices, dtype=np.float64)
-    # Vertices at the same position are one (meshes split them along seams).
-    _, same = np.unique(v, axis=0, return_inverse=True)
-    f = same.reshape(-1)[faces]
+    f = merged_vertices(v)[faces]
+    degenerate = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
+    _, first = np.unique(np.sort(f, axis=1), axis=0, return_index=True)
+    repeat[:] = True
+    repeat[first] = False
+    repeat &= ~degenerate
+    topo = np.flatnonzero(~repeat & ~degenerate)
+    if len(topo) == 0:
+        return sides, repeat
+    sides[topo] = _closed_components(v, faces[topo], f[topo])
+    return sides, repeat
+
+
+def _closed_components(v: np.ndarray, faces: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """:func:`face_topology`'s sides of non-degenerate, unrepeated faces
+    ``faces`` whose merged corners are ``f``."""
+    nf = len(faces)
     a = f.reshape(-1)
     b = f[:, [1, 2, 0]].reshape(-1)
     lo, hi = np.minimum(a, b), np.maximum(a, b)
@@ -460,22 +532,30 @@ def closed_sides(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     # +1 walked low to high, -1 back: an edge shared the other way sums to 0.
     walk = np.bincount(inverse, weights=np.where(a < b, 1.0, -1.0), minlength=len(count))
     good = (count == 2) & (walk == 0)
-    edge_ok = good[inverse] & (a != b)
-    local = edge_ok.reshape(-1, 3).all(axis=1)
-    # Components: faces joined by edges that two faces share.
+    # A face beside an edge shared by more than two faces, or walked the
+    # same way by both, is open: it may be wound against its neighbours.
+    local = (good | (count == 1))[inverse].reshape(-1, 3).all(axis=1)
+    # Components: faces joined by edges that two faces walk opposite ways.
     order = np.argsort(inverse, kind="stable")
     first = np.concatenate([[0], np.cumsum(count)[:-1]])
-    pair = first[count == 2]
+    pair = first[good]
     u, w = order[pair] // 3, order[pair + 1] // 3
     root = connected_components(nf, u, w)
-    # A component is closed when every face of it is.
-    open_count = np.bincount(root, weights=(~local).astype(np.float64), minlength=nf)
+    # The length of a component's holes: its edges that are not shared
+    # with a neighbour walking them the other way.
+    corner = v[faces.reshape(-1)]
+    length = np.linalg.norm(v[faces[:, [1, 2, 0]].reshape(-1)] - corner, axis=1)
+    hole = np.bincount(root[np.arange(len(a)) // 3], weights=np.where(good[inverse], 0.0, length), minlength=nf)
+    t = v[faces]
+    area = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+    skin = np.bincount(root, weights=area, minlength=nf)
+    closed = hole**2 <= HOLE_SHARE * skin
     p0, p1, p2 = (v[faces[:, k]] - v.mean(axis=0) for k in range(3))
     volume = np.bincount(root, weights=np.einsum("ij,ij->i", p0, np.cross(p1, p2)), minlength=nf)
     extent = float(np.ptp(v, axis=0).max()) if len(v) else 0.0
     tiny = 1e-12 * extent**3
     sign = np.where(volume > tiny, 1, np.where(volume < -tiny, -1, 0))
-    return np.where(open_count[root] == 0, sign[root], 0).astype(np.int8)
+    return np.where(local & closed[root], sign[root], 0).astype(np.int8)
 
 
 def connected_components(n: int, u: np.ndarray, w: np.ndarray) -> np.ndarray:

@@ -38,7 +38,7 @@ from aniso3d.build.mesh import (
     MAX_SHININESS,
     Mesh,
     check_readable_file,
-    closed_sides,
+    face_topology,
     load_mesh,
 )
 from aniso3d.build.stream import TriangleChunk
@@ -78,20 +78,25 @@ class TriangleSource:
     #: (n_faces,) int8 once :meth:`find_closed` found them, else None: +1 or -1
     #: on closed surfaces (outward or inward winding), 0 elsewhere.
     closed: np.ndarray | None = None
+    #: (n_faces,) bool once :meth:`find_closed` found them, else None: faces
+    #: that repeat an earlier one (:func:`~aniso3d.build.mesh.face_topology`),
+    #: left out of the build.
+    repeat: np.ndarray | None = None
 
     def find_closed(self, memory_budget: int | None = None) -> bool:
-        """Find which faces lie on a closed surface
-        (:func:`~aniso3d.build.mesh.closed_sides`, vertices matched by
-        position), reading every triangle once, unless that would take more
-        than ``memory_budget`` bytes (about :data:`CLOSED_BYTES_PER_FACE` a
-        face): then none is taken as closed. True if found."""
+        """Find which faces lie on a closed surface and which repeat an
+        earlier face (:func:`~aniso3d.build.mesh.face_topology`, vertices
+        matched by position), reading every triangle once, unless that would
+        take more than ``memory_budget`` bytes (about
+        :data:`CLOSED_BYTES_PER_FACE` a face): then none is taken as closed
+        or repeated. True if found."""
         if self.closed is not None:
             return True
         if memory_budget is not None and self.n_faces * CLOSED_BYTES_PER_FACE > memory_budget:
             return False
         tri = [self.read(a, min(self.n_faces, a + READ_FACES)).triangles for a in range(0, self.n_faces, READ_FACES)]
         tri = np.concatenate(tri) if tri else np.zeros((0, 3, 3))
-        self.closed = closed_sides(tri.reshape(-1, 3), np.arange(3 * len(tri)).reshape(-1, 3))
+        self.closed, self.repeat = face_topology(tri.reshape(-1, 3), np.arange(3 * len(tri)).reshape(-1, 3))
         return True
 
     def bounds(self) -> np.ndarray:
@@ -138,8 +143,8 @@ class MeshSource(TriangleSource):
                              m.shininess[start:stop])  # fmt: skip
 
     def find_closed(self, memory_budget: int | None = None) -> bool:
-        if self.closed is None:
-            self.closed = self.mesh.closed_sides()  # the mesh is in memory already
+        if self.closed is None:  # the mesh is in memory already
+            self.closed, self.repeat = face_topology(self.mesh.vertices, self.mesh.faces)
         return True
 
 

@@ -62,6 +62,14 @@ class PointCloud:
             Made by the renderer from the texture
             (:mod:`aniso3d.rendering.splat.clips`); None: no point is cut,
             as for a scanned cloud or the points ``to_points`` makes.
+        sheet: (N,) bool, the point stands for a piece of a surface sheet:
+            its facets fill their plane's section of the voxel, a surface
+            that goes on into the neighbours (the volume renderer's
+            :data:`~aniso3d.rendering.volume.RUN_SHARE`), not a leaf or a
+            blade inside it. Quality "high" takes such a splat's surface
+            to reach across a pixel's depth as a closed surface's does.
+            Made by the renderer from the texture
+            (:mod:`aniso3d.rendering.splat.clips`); None: no point is.
     """
 
     positions: np.ndarray
@@ -74,6 +82,7 @@ class PointCloud:
     coherence: np.ndarray | None = None
     one_sided: np.ndarray | None = None
     clips: np.ndarray | None = None
+    sheet: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         p = np.ascontiguousarray(self.positions, dtype=np.float64)
@@ -125,6 +134,11 @@ class PointCloud:
             if n and not axis_like.all():
                 raise InputError("point clip normals must be a coordinate axis, its opposite, or 0 (no clip)")
             object.__setattr__(self, "clips", None if not m.any() else cl)
+        if self.sheet is not None:
+            sheet = np.asarray(self.sheet)
+            if sheet.shape != (n,) or sheet.dtype != bool:
+                raise InputError(f"point sheet must be a ({n},) bool array, got {sheet.dtype} {sheet.shape}")
+            object.__setattr__(self, "sheet", None if not sheet.any() else sheet.copy())
         object.__setattr__(self, "positions", p)
         object.__setattr__(self, "normals", nrm.astype(np.float32))
         object.__setattr__(self, "areas", areas)

@@ -682,11 +682,17 @@ def plan_chunks(n_faces: int, chunk_size: int) -> list[tuple[int, int]]:
 
 def read_chunk(source, start: int, stop: int) -> TriangleChunk:
     """Faces ``start:stop`` of ``source`` with the closed-surface flags the
-    source found before the build (``source.closed``), if any."""
+    source found before the build (``source.closed``), if any, less the
+    faces that repeat an earlier one (``source.repeat``)."""
     chunk = source.read(start, stop)
     closed = getattr(source, "closed", None)
     if chunk.closed is None and closed is not None:
         chunk = replace(chunk, closed=closed[start:stop])
+    repeat = getattr(source, "repeat", None)
+    if repeat is not None and repeat[start:stop].any():
+        keep = ~repeat[start:stop]
+        chunk = TriangleChunk(chunk.triangles[keep], chunk.kd[keep], chunk.ks[keep], chunk.shininess[keep],
+                              None if chunk.closed is None else chunk.closed[keep])  # fmt: skip
     return chunk
 
 

@@ -764,6 +764,7 @@ def build_texture(
     t0 = time.perf_counter()
     found = source.find_closed(memory_budget)
     stats["closed_faces"] = int(np.count_nonzero(source.closed)) if found else None
+    stats["repeated_faces"] = int(np.count_nonzero(source.repeat)) if found and source.repeat is not None else None
     timings["closed"] = time.perf_counter() - t0
     seconds: dict = {}
     t0 = time.perf_counter()

@@ -122,7 +122,7 @@ def section_polygons(normal: np.ndarray, offset: np.ndarray) -> tuple[np.ndarray
     return uv, real, np.stack([t1, t2], axis=1)
 
 
-def _clipped(x: np.ndarray, y: np.ndarray, u: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, ...]:
+def clipped_piece(x: np.ndarray, y: np.ndarray, u: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, ...]:
     """Area (N,), centroid (N, 2) and chord length along the line (N,) of
     the closed convex polygons with vertices ``(x, y)`` (N, 12 each,
     counter-clockwise) where ``(x, y) . u >= c`` (u (N, 2) unit)."""
@@ -179,7 +179,7 @@ def fit_halfplanes(normal, offset, area, centroid, turns: int = 3) -> tuple[np.n
     q0 = 0.5 - (n.sum(axis=1) * 0.5 - d)[:, None] * n
     rel = np.asarray(centroid, np.float64).reshape(-1, 3) - q0
     target = np.stack([np.einsum("nk,nk->n", rel, frame[:, 0]), np.einsum("nk,nk->n", rel, frame[:, 1])], 1)
-    section, s_cent, _ = _clipped(x, y, np.tile([1.0, 0.0], (N, 1)), np.full(N, -1e9))
+    section, s_cent, _ = clipped_piece(x, y, np.tile([1.0, 0.0], (N, 1)), np.full(N, -1e9))
     want = np.minimum(np.asarray(area, np.float64).reshape(-1), section)
     aim = np.arctan2(target[:, 1] - s_cent[:, 1], target[:, 0] - s_cent[:, 0])
     theta = aim
@@ -190,12 +190,12 @@ def fit_halfplanes(normal, offset, area, centroid, turns: int = 3) -> tuple[np.n
         lo, hi = s.min(axis=1), s.max(axis=1)
         c = lo + (hi - lo) * (1.0 - want / np.maximum(section, 1e-12))
         for _ in range(_STEPS):
-            got, g, length = _clipped(x, y, u, c)
+            got, g, length = clipped_piece(x, y, u, c)
             more = got > want  # the line must move up
             lo, hi = np.where(more, c, lo), np.where(more, hi, c)
             step = c + (got - want) / np.maximum(length, 1e-9)
             c = np.where((step >= lo) & (step <= hi), step, 0.5 * (lo + hi))
-        got, g, _ = _clipped(x, y, u, c)
+        got, g, _ = clipped_piece(x, y, u, c)
         if it == turns:
             break
         # Turn the line by the angle still between the centroids, over how

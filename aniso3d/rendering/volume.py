@@ -135,6 +135,7 @@ from aniso3d.rendering.sheet_halfplanes import (
     sheet_halfplanes,
 )
 from aniso3d.rendering.sheet_slopes import SheetSlopes, sheet_slopes, smoothed
+from aniso3d.rendering.sheet_strips import STRIP_FOOT, STRIP_PIXELS, SheetStrips, sheet_strips, strip_cover, strip_words
 
 #: Brick edge in voxels of the two-level index.
 BRICK = 8
@@ -829,7 +830,16 @@ def sheet_terms(
     # the voxel, where the footprint is filtered.
     with np.errstate(divide="ignore"):
         filtered = (opacity == "planar") & (edges == "filtered") & (1.0 / pixels > 0.0) & (pixels >= HALF_PIXELS)
-    halfp = layout.halfplanes.mask[rows] & filtered if layout is not None else np.zeros(len(rows), bool)
+    # Strips (sheet_strips): a closed surface's partial sheet between two
+    # lines (or one: its half-planes), the half-plane's terms with both
+    # lines, drawn from STRIP_PIXELS on.
+    with np.errstate(divide="ignore"):
+        closer = (opacity == "planar") & (edges == "filtered") & (1.0 / pixels > 0.0) & (pixels >= STRIP_PIXELS)
+    if layout is not None:
+        strip = layout.strips.mask[rows] & closer
+        halfp = (layout.halfplanes.mask[rows] & ~layout.strips.mask[rows] & filtered) | strip
+    else:
+        strip = halfp = np.zeros(len(rows), bool)
     share = np.where(halfp, 1.0, share)
     # Surface sheets (counted in runs) keep a closed surface's back (vis).
     sv = np.where(sh.share[at] >= RUN_SHARE, 1.0, vis)
@@ -873,8 +883,12 @@ def sheet_terms(
         if len(e):
             with np.errstate(divide="ignore", invalid="ignore"):
                 p = x[e] + w[None, :] * np.where(nw[e] != 0.0, -s_in[e] / nw[e], 0.0)[:, None]
-            hpl = layout.halfplanes
-            ws[e] *= halfplane_ramp(hpl.angle[rows[e]], hpl.offset[rows[e]], sh.offset[at][e], p, nh[e], w, foot[e])
+            hpl, stp, re = layout.halfplanes, layout.strips, rows[e]
+            ws[e] *= np.where(
+                strip[e],
+                strip_cover(stp.angle[re], stp.lo[re], stp.hi[re], sh.offset[at][e], p, nh[e], w, STRIP_FOOT * foot[e]),
+                halfplane_ramp(hpl.angle[re], hpl.offset[re], sh.offset[at][e], p, nh[e], w, foot[e]),
+            )
         keep = (counted > 0.0) | (weight > 0.0)
         run = {"voxel": owner[keep], "normal": nh[keep], "nw": nw[keep], "band": band[keep],
                "hit": np.where(hit, fill * ramp[:, 0], 0.0)[keep], "counted": counted[keep],
@@ -979,7 +993,8 @@ class SheetLayout:
     and :class:`~aniso3d.rendering.sheet_slopes.SheetSlopes` (as the GPU
     stores them, float16), the halos' cells as keys of the grid with its
     margin (sorted, with the halo indices in that order), and the partial
-    sheets' :class:`~aniso3d.rendering.sheet_halfplanes.SheetHalfplanes`."""
+    sheets' :class:`~aniso3d.rendering.sheet_halfplanes.SheetHalfplanes` and
+    :class:`~aniso3d.rendering.sheet_strips.SheetStrips`."""
 
     sheets: EntrySheets
     edges: SheetEdges
@@ -987,6 +1002,7 @@ class SheetLayout:
     halo_order: np.ndarray
     slopes: SheetSlopes
     halfplanes: SheetHalfplanes
+    strips: SheetStrips
 
 
 def sheet_layout(texture: AnisoTexture) -> SheetLayout:
@@ -999,7 +1015,8 @@ def sheet_layout(texture: AnisoTexture) -> SheetLayout:
     keys = cell_keys(ed.halo_cell + GRID_PAD, pshape)
     order = np.argsort(keys, kind="stable")
     hp = sheet_halfplanes(texture, sheets, sheets.share >= RUN_SHARE)
-    return SheetLayout(sheets, ed, keys[order], order, SheetSlopes(half(sl.shape), half(sl.kd)), hp)
+    st = sheet_strips(texture, sheets, sheets.share >= RUN_SHARE, hp, closed_sign(texture))
+    return SheetLayout(sheets, ed, keys[order], order, SheetSlopes(half(sl.shape), half(sl.kd)), hp, st)
 
 
 # ------------------------------------------------------------ the NumPy ray
@@ -1309,7 +1326,8 @@ def pack_volume(texture: AnisoTexture) -> dict[str, np.ndarray]:
     pairs in uint32), ``entries`` (:data:`ENTRY_WORDS` uint32 per entry: the
     shading entry and its sheet, :func:`entry_sheets`, with its edges and
     after its voxel's entries the halos there, :func:`sheet_edges`; or its
-    half-plane, :func:`~aniso3d.rendering.sheet_halfplanes.sheet_halfplanes`) and
+    half-plane, :func:`~aniso3d.rendering.sheet_halfplanes.sheet_halfplanes`,
+    or strip, :func:`~aniso3d.rendering.sheet_strips.sheet_strips`) and
     ``directions``, over the GPU grid (:func:`pack_volume_grid`). CPU only;
     checks the texture holds finite numbers."""
     return pack_volume_grid(texture).arrays
@@ -1379,14 +1397,20 @@ def pack_volume_grid(texture: AnisoTexture) -> PackedVolume:
     entries[:, 11] = edge_words(edges.face, edges.kind, edges.angle)
     # A half-plane has no edges on faces: its words take the edges' angles' bits.
     halfplanes = sheet_halfplanes(texture, sheets, sheets.share >= RUN_SHARE)
-    entries[:, 11] = np.where(halfplanes.mask, (entries[:, 11] & 0x7FF) | halfplane_words(halfplanes), entries[:, 11])
+    entries[:, 11] = np.where(halfplanes.mask, (entries[:, 11] & 0x7F7) | halfplane_words(halfplanes), entries[:, 11])
     slopes = sheet_slopes(texture, sheets, sheets.share >= RUN_SHARE)
     # (S11, S12), (S22, dkd_r/du), (dkd_r/dv, dkd_g/du), (dkd_g/dv, dkd_b/du), (dkd_b/dv, sigma).
-    sigma = closed_sign(texture)[:, None]
-    model = np.concatenate([slopes.shape, slopes.kd.transpose(0, 2, 1).reshape(E, 6), sigma], axis=1)
+    sigma = closed_sign(texture)
+    model = np.concatenate([slopes.shape, slopes.kd.transpose(0, 2, 1).reshape(E, 6), sigma[:, None]], axis=1)
     model = model.astype(np.float16).view(np.uint32)
     entries[:, 7] = model[:, 0]
     entries[:, 12:16] = model[:, 1:5]
+    # A strip is a half-plane with a far line: no surface sheet, so no
+    # linear model in word 12, which takes the far line's offset.
+    strips = sheet_strips(texture, sheets, sheets.share >= RUN_SHARE, halfplanes, sigma)
+    near, far = strip_words(strips)
+    entries[:, 11] = np.where(strips.mask, (entries[:, 11] & 0x7F7) | near, entries[:, 11])
+    entries[:, 12] = np.where(strips.mask, far, entries[:, 12])
 
     # The GPU grid: GRID_PAD voxels of margin (halos of edges on the outer
     # planes), the texture's voxels first, then the halos' voxels it lacks.
@@ -1579,6 +1603,8 @@ class VolumeRenderer:
             "CLIP_MARGIN": CLIP_MARGIN,
             "HALF_C_RANGE": HALF_C_RANGE,
             "HALF_PIXELS": HALF_PIXELS,
+            "STRIP_PIXELS": STRIP_PIXELS,
+            "STRIP_FOOT": STRIP_FOOT,
         }
         self._defines = defines
         #: Compile the density, normal and opacity modes into the program (one

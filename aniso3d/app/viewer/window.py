@@ -350,6 +350,10 @@ class Viewer:
                 if spare > 0:
                     time.sleep(spare)
         finally:
+            builder = self.data.builder
+            if builder.running:
+                # A daemon thread: the process exits without waiting for it.
+                self._write(f"quit while building {builder.label}: not waiting for it")
             self.close()
         return 0
 

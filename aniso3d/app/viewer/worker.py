@@ -66,6 +66,11 @@ class Builder:
         self._thread = threading.Thread(target=work, name="aniso3d-build", daemon=True)
         self._thread.start()
 
+    @property
+    def running(self) -> bool:
+        """The job's thread is still working (finished or not collected: False)."""
+        return self._thread is not None and self._thread.is_alive()
+
     def cancel(self) -> None:
         """Ask the running job to stop at its next progress report."""
         self._cancel.set()

@@ -146,7 +146,7 @@ def upload_points(gl: GLContext, cloud: PointCloud | LodPoints) -> GPUPoints:
     order = morton_order(cloud.positions - origin)
     arrays = (cloud.positions, uploaded_normals(cloud), cloud.areas, cloud.kd, cloud.ks, cloud.shininess)
     return _upload_arrays(gl, GPUPoints, arrays, order, bounds, origin, one_sided=cloud.one_sided,
-                          clips=cloud.clips)  # fmt: skip
+                          clips=cloud.clips, sheet=cloud.sheet)  # fmt: skip
 
 
 #: Least coherence uploaded: the normal's length carries it, and the splat's
@@ -187,17 +187,20 @@ def _texture_rows(data: np.ndarray, per_row: int) -> tuple[np.ndarray, tuple[int
 
 
 def _upload_arrays(
-    gl: GLContext, cls, arrays, order, bounds, origin, one_sided=None, clips=None, attrib=True, **extra
+    gl: GLContext, cls, arrays, order, bounds, origin, one_sided=None, clips=None, sheet=None, attrib=True,
+    **extra,
 ) -> GPUPoints:
     """Upload the points ``order`` of ``arrays`` (positions, normals,
     areas, kd, ks, shininess), in that order, relative to ``origin``; a
     ``one_sided`` point (:attr:`~aniso3d.build.points.PointCloud.one_sided`)
-    gets its size negated (splat.vert culls it where it faces away); the
-    points with ``clips`` (:attr:`~aniso3d.build.points.PointCloud.clips`,
-    None: none) get their shininess negated and are uploaded again, with
-    their planes in the local frame (:attr:`GPUPoints.cut`). ``attrib``: make
-    the attribute texture (only the deferred shading of quality "fast" reads
-    it, and it never draws a cut upload)."""
+    gets its size negated (splat.vert culls it where it faces away); a
+    ``sheet`` point (:attr:`~aniso3d.build.points.PointCloud.sheet`) gets the
+    sign bit of its ks set (-0.0 for ks 0; splat.vert reads it); the points
+    with ``clips`` (:attr:`~aniso3d.build.points.PointCloud.clips`, None:
+    none) get their shininess negated and are uploaded again, with their
+    planes in the local frame (:attr:`GPUPoints.cut`). ``attrib``: make the
+    attribute texture (only the deferred shading of quality "fast" reads it,
+    and it never draws a cut upload)."""
     positions, normals, areas, kd, ks, shininess = arrays
     n = len(order)
     rows = -(-n // ATTRIB_PER_ROW)
@@ -213,14 +216,14 @@ def _upload_arrays(
     data[:, 3:6] = normals[order]
     data[:, 6] = size if one_sided is None else np.where(one_sided[order], -size, size)
     data[:, 7:10] = kd[order]
-    data[:, 10] = ks[order]
+    data[:, 10] = ks[order] if sheet is None else np.where(sheet[order], np.copysign(ks[order], -1.0), ks[order])
     data[:, 11] = shininess[order]
     ctx = gl.ctx
     tex, attrib_nbytes = None, 0
     if attrib:
         values = np.zeros((rows * ATTRIB_PER_ROW, 8), dtype=np.float32)
         values[:n, 0:3] = data[:, 3:6]
-        values[:n, 3] = data[:, 10]
+        values[:n, 3] = ks[order]  # plain: the sheet bit is for the high passes
         values[:n, 4:7] = data[:, 7:10]
         values[:n, 7] = data[:, 11]
         tex = gl.track(ctx.texture((2 * ATTRIB_PER_ROW, rows), 4, values.tobytes(), dtype="f4"))
@@ -233,7 +236,7 @@ def _upload_arrays(
         cut_ids = np.flatnonzero(cut_mask)
         if len(cut_ids):
             cut = _upload_cut(gl, cls, arrays, order[cut_ids], clips[cut_ids], bounds, origin,
-                              None if one_sided is None else one_sided)  # fmt: skip
+                              one_sided, sheet)  # fmt: skip
             data[cut_ids, 11] = -data[cut_ids, 11]  # the sign bit: drawn apart (-0.0 for 0)
         else:
             cut_ids = cut_mask = None
@@ -260,7 +263,7 @@ def _upload_arrays(
     )
 
 
-def _upload_cut(gl: GLContext, cls, arrays, order, clips, bounds, origin, one_sided) -> GPUPoints:
+def _upload_cut(gl: GLContext, cls, arrays, order, clips, bounds, origin, one_sided, sheet=None) -> GPUPoints:
     """The points ``order`` of ``arrays`` with clip planes ``clips`` (their
     rows, in that order) as a :attr:`GPUPoints.cut` upload: the same origin,
     no attribute texture, the planes in its ``clip_table`` (row i: point i)."""
@@ -270,7 +273,7 @@ def _upload_cut(gl: GLContext, cls, arrays, order, clips, bounds, origin, one_si
         raise ResourceError(f"{len(table)} points' clip planes need a texture of {h} rows, above this "
                             f"OpenGL's limit of {gl.max_texture_size}; draw the cloud in parts")  # fmt: skip
     cut = _upload_arrays(gl, GPULodPoints if cls is GPULodPoints else GPUPoints, arrays, order, bounds, origin,
-                         one_sided, attrib=False)  # fmt: skip
+                         one_sided, sheet=sheet, attrib=False)  # fmt: skip
     cut.clip_table = gl.track(gl.ctx.texture((2 * w, h), 3, padded.tobytes(), dtype="f4"))
     cut.clip_table.filter = moderngl.NEAREST, moderngl.NEAREST
     cut.nbytes += padded.nbytes
@@ -321,13 +324,16 @@ def upload_lod(gl: GLContext, lod: LodPoints) -> GPULodPoints:
     one_sided = None
     if any(c.one_sided is not None for c in clouds):
         one_sided = np.concatenate([np.zeros(len(c), bool) if c.one_sided is None else c.one_sided for c in clouds])
+    sheet = None
+    if any(c.sheet is not None for c in clouds):
+        sheet = np.concatenate([np.zeros(len(c), bool) if c.sheet is None else c.sheet for c in clouds])
     clips = None
     if any(c.clips is not None for c in clouds):
         clips = np.concatenate([np.zeros((len(c), 2, 5)) if c.clips is None else c.clips for c in clouds])
     empty = np.full((2, 3), np.nan)
     handle = _upload_arrays(
         gl, GPULodPoints, arrays, np.concatenate(parts), bounds, origin, one_sided=one_sided, clips=clips,
-        lod=lod, level_first=np.asarray(level_first, dtype=np.int64),
+        sheet=sheet, lod=lod, level_first=np.asarray(level_first, dtype=np.int64),
         rank=rank, run_first=run_first, run_count=run_count,
         level_bounds=np.stack([c.bounds if len(c) else empty for c in clouds]),
         level_size=np.array([np.sqrt(c.areas.max()) if len(c) else 0.0 for c in clouds]),

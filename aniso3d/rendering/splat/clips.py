@@ -32,7 +32,7 @@ from aniso3d.build.texture import AnisoTexture
 from aniso3d.errors import InputError
 from aniso3d.grid import ranges
 from aniso3d.rendering.sheet_edges import CREASE, MAX_EDGES, OPEN, sheet_edges
-from aniso3d.rendering.volume import RUN_SHARE, entry_sheets
+from aniso3d.rendering.volume import RUN_SHARE, EntrySheets, entry_sheets
 
 #: Edge kinds a splat is cut at: open (the surface ends) and creases (another
 #: surface meets it there, a box's edge, a room's corner).
@@ -46,33 +46,52 @@ CLIP_KINDS = (OPEN, CREASE)
 _CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
-def entry_clips(texture: AnisoTexture, kinds: tuple[int, ...] = CLIP_KINDS) -> np.ndarray:
+def entry_clips(
+    texture: AnisoTexture, kinds: tuple[int, ...] = CLIP_KINDS, sheets: EntrySheets | None = None
+) -> np.ndarray:
     """(E, 2, 5) float64: per entry of ``texture`` the half-spaces ``m . x <=
     o`` (rows ``(m, o, phi)``, world units; ``m = 0``: none) of the faces of
     its voxel where its surface sheet's edges are of a kind in ``kinds``
     (:func:`~aniso3d.rendering.sheet_edges.sheet_edges`), and a crease's
     partner's angle ``phi`` about the edge from the sheet (0 for an open
     edge; the sheet's normal is its entry's mean normal). Computed once per
-    texture and ``kinds`` (a texture is not changed in place)."""
-    per_texture = _CACHE.setdefault(texture, {})
-    key = tuple(int(k) for k in kinds)
-    if key not in per_texture:
-        planes = _entry_clips(texture, key)
-        rows = np.flatnonzero(np.any(planes[..., :3] != 0, axis=(1, 2)))
-        per_texture[key] = (rows, planes[rows])
-    rows, planes = per_texture[key]
+    texture and ``kinds`` (a texture is not changed in place); ``sheets``:
+    the texture's :func:`~aniso3d.rendering.volume.entry_sheets`, if at hand."""
+    rows, planes = _clip_data(texture, tuple(int(k) for k in kinds), sheets)
     out = np.zeros((texture.n_entries, MAX_EDGES, 5))
     out[rows] = planes
     return out
 
 
-def _entry_clips(texture: AnisoTexture, kinds: tuple[int, ...]) -> np.ndarray:
+def entry_sheet_flags(texture: AnisoTexture, sheets: EntrySheets | None = None) -> np.ndarray:
+    """(E,) bool: the entries of ``texture`` that are surface sheets (fill
+    their plane's section of the voxel, :data:`~aniso3d.rendering.volume.RUN_SHARE`),
+    computed once per texture."""
+    per_texture = _CACHE.setdefault(texture, {})
+    if "sheet" not in per_texture:
+        sheets = entry_sheets(texture) if sheets is None else sheets
+        per_texture["sheet"] = sheets.share >= RUN_SHARE
+    return per_texture["sheet"]
+
+
+def _clip_data(texture: AnisoTexture, key: tuple[int, ...], sheets: EntrySheets | None):
+    """The entries with clip planes of ``key``'s kinds and their planes, cached."""
+    per_texture = _CACHE.setdefault(texture, {})
+    if key not in per_texture:
+        sheets = entry_sheets(texture) if sheets is None else sheets
+        entry_sheet_flags(texture, sheets)
+        planes = _entry_clips(texture, key, sheets)
+        rows = np.flatnonzero(np.any(planes[..., :3] != 0, axis=(1, 2)))
+        per_texture[key] = (rows, planes[rows])
+    return per_texture[key]
+
+
+def _entry_clips(texture: AnisoTexture, kinds: tuple[int, ...], sheets: EntrySheets) -> np.ndarray:
     """:func:`entry_clips`, computed."""
     E = texture.n_entries
     out = np.zeros((E, MAX_EDGES, 5))
     if E == 0:
         return out
-    sheets = entry_sheets(texture)
     edges = sheet_edges(texture, sheets, sheets.share >= RUN_SHARE)
     cut = (edges.face >= 0) & np.isin(edges.kind, kinds)
     row, k = np.nonzero(cut)
@@ -100,17 +119,19 @@ def clipped(
     order), with each point's :func:`entry_clips` planes."""
     planes = entry_clips(texture, kinds)
     normal = np.asarray(texture.entry_normal, dtype=np.float64)
+    sheet = entry_sheet_flags(texture).copy()
     if voxels is not None:
         off = np.asarray(texture.entry_offsets, dtype=np.int64)
         v = np.asarray(voxels, dtype=np.int64)
-        planes, normal = planes[ranges(off[v], off[v + 1])], normal[ranges(off[v], off[v + 1])]
+        rows = ranges(off[v], off[v + 1])
+        planes, normal, sheet = planes[rows], normal[rows], sheet[rows]
     if np.ndim(per_entry) == 0:
         counts = None if int(per_entry) == 1 else np.full(len(planes), int(per_entry))
     else:
         pe = np.asarray(per_entry, dtype=np.int64)
         counts = pe if voxels is None else pe[ranges(off[v], off[v + 1])]
     if counts is not None:
-        planes, normal = np.repeat(planes, counts, axis=0), np.repeat(normal, counts, axis=0)
+        planes, normal, sheet = (np.repeat(a, counts, axis=0) for a in (planes, normal, sheet))
     if len(planes) != len(cloud):
         raise InputError(f"{len(cloud)} points, but the texture's entries make {len(planes)}: not its points")
     # A point whose normal was turned against its entry's (a closed
@@ -119,7 +140,7 @@ def clipped(
     planes[turned, :, 4] *= -1.0
     return PointCloud(cloud.positions, cloud.normals, cloud.areas, cloud.kd, cloud.ks, cloud.shininess,
                       name=cloud.name, coherence=cloud.coherence, one_sided=cloud.one_sided,
-                      clips=planes)  # fmt: skip
+                      clips=planes, sheet=sheet)  # fmt: skip
 
 
 def texture_points(

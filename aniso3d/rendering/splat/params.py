@@ -91,9 +91,38 @@ AA_PLANE_REACH = 2.0
 #: fragments split into several surfaces that composed as independent
 #: layers, and the background showed through the rim of a minified blob as
 #: a speckle. Closed surfaces facing the eye can only lie a solid's thickness
-#: apart; two-sided splats (leaves, open sheets) keep the span alone. 0: the
-#: span alone everywhere.
+#: apart; two-sided splats (leaves, open sheets) keep the span alone, but
+#: surface sheets' where they graze the ray (AA_SHEET_REACH). 0: the span
+#: alone everywhere.
 AA_SURFACE_REACH = 1.0
+#: Whether two-sided splats of surface sheets (:attr:`~aniso3d.build.points.PointCloud.sheet`:
+#: their entry fills its plane's section of the voxel, a surface that goes on,
+#: not a leaf inside it) reach as closed surfaces' do (AA_SURFACE_REACH),
+#: where they graze the ray (AA_SHEET_GRAZE) and chained (AA_SHEET_CHAIN). An
+#: open sheet seen at a grazing angle along a fold (the corpus shell) changes
+#: depth as fast as a closed surface's rim, its fragments split into surfaces
+#: that composed as independent layers, and the background showed through
+#: the folds as light lines. Leaves and blades in a voxel are not sheets:
+#: letting every two-sided splat of coherent normals reach cost the tree and
+#: the grass minified.
+AA_SHEET_REACH = True
+#: A two-sided sheet's fragment reaches only where its depth changes across
+#: AA_SURFACE_REACH pixels by at least this many spans (a grazing sheet):
+#: a sheet nearer to facing the eye lies within its span, and reaching by
+#: less only took in what lies just behind (the wall behind the room's
+#: headboard, the floor behind its front wall's bottom edge; ungated, the
+#: room lost 3 dB minified). Measured on the corpus (docs/splat_aa.md,
+#: bench_splat_sheets): at 2 the shell gains 0.6 dB more minified and the
+#: tree loses 0.08 dB there (at 3, 0.04).
+AA_SHEET_GRAZE = 3.0
+#: Where a pixel holds no closed surface seen from outside, its nearest
+#: surface reaches only as far as its slices are chained: each slice it
+#: takes extends it to this many spans beyond, up to the reach. Unchained,
+#: a bed top's reach at a grazing angle took in the headboard behind its
+#: edge; a closed surface's rim keeps the reach whole (chained, the blob's
+#: rim split again). Measured as AA_SHEET_GRAZE: at 2 the shell +0.17 dB
+#: minified and the tree -0.06; at 1 the shell -0.92.
+AA_SHEET_CHAIN = 1.5
 #: A splat whose true projected area is below AA_REGIME[0]^2 pixels is drawn as
 #: a filtered box of its true area; above AA_REGIME[1]^2, as its exact shape
 #: with the size factor (which closes the gaps between resolved splats); a

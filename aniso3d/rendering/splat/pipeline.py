@@ -125,6 +125,7 @@ class SplatPipeline:
             defines.update(
                 AA=1, LAYERS=AA_LAYERS, SLICES=AA_SLICES, FILTER=AA_FILTER, PLANE_REACH=float(AA_PLANE_REACH),
                 LAST_WEIGHTS=int(params.AA_LAST_WEIGHTS), SURFACE_REACH=float(params.AA_SURFACE_REACH),
+                SHEET_REACH=int(params.AA_SHEET_REACH), SHEET_GRAZE=float(params.AA_SHEET_GRAZE),
             )
             if clips:
                 defines.update(CLIPS=1, CLIP_TABLE_PER_ROW=CLIP_TABLE_PER_ROW)
@@ -183,7 +184,8 @@ class SplatPipeline:
         if aa:
             mean, reach_ = (float(x) for x in params.AA_CLOSE)
             defines = {"LAYERS": AA_LAYERS, "WORDS": AA_SLICES // 32, "CLOSE_MEAN": mean, "CLOSE_REACH": reach_,
-                       "CLOSE_MEAN_SIDED": float(params.AA_CLOSE_SIDED)}  # fmt: skip
+                       "CLOSE_MEAN_SIDED": float(params.AA_CLOSE_SIDED),
+                       "CHAIN": float(params.AA_SHEET_CHAIN)}  # fmt: skip
         if far:
             defines["FAR"] = 1
         prog = self.gl.program("splat_resolve.vert", fragment, defines=defines)

@@ -22,7 +22,16 @@ fraction of the pixel a splat covers; linear depth z; colour):
    across :data:`~aniso3d.rendering.splat.params.AA_SURFACE_REACH` pixels
    where the pixel's ray meets its plane (at most its bounding sphere's
    depth), so that a closed surface nearly along the ray, whose fragments
-   lie at scattered depths, stays one.
+   lie at scattered depths, stays one; the same for a two-sided splat of a
+   surface sheet (:attr:`~aniso3d.build.points.PointCloud.sheet`, with
+   :data:`~aniso3d.rendering.splat.params.AA_SHEET_REACH`) where that
+   change is at least :data:`~aniso3d.rendering.splat.params.AA_SHEET_GRAZE`
+   spans (a sheet grazing the ray). Where the pixel holds no one-sided
+   splat drawn with its back culled, the nearest surface takes beyond its
+   span only the slices chained to it, each less than
+   :data:`~aniso3d.rendering.splat.params.AA_SHEET_CHAIN` spans beyond the
+   one before (a fold's fragments lie slice after slice; a sheet behind a
+   grazing one's edge lies apart).
 4. Layer k holds surface k, for k < :data:`~aniso3d.rendering.splat.params.AA_LAYERS` - 1;
    the last layer every surface from there on.
 5. Within a surface splats tile it, so coverages add: a = min(1, sum c); the
@@ -220,7 +229,8 @@ def subpixel_fragments_np(cloud: PointCloud, view: FrameView, opts: SplatOptions
         counts = counts[keep]
         cloud = PointCloud(cloud.positions[keep], cloud.normals[keep], cloud.areas[keep], cloud.kd[keep],
                            cloud.ks[keep], cloud.shininess[keep], coherence=cloud.coherence[keep],
-                           clips=None if cloud.clips is None else cloud.clips[keep])  # fmt: skip
+                           clips=None if cloud.clips is None else cloud.clips[keep],
+                           sheet=None if cloud.sheet is None else cloud.sheet[keep])  # fmt: skip
     p = cloud.positions - eye
     n = cloud.normals
     t_ax, b_ax = tangent_frame(n)
@@ -318,7 +328,10 @@ def subpixel_fragments_np(cloud: PointCloud, view: FrameView, opts: SplatOptions
     with np.errstate(divide="ignore", invalid="ignore"):
         gx = npn * (n[splat] @ r) / proj[0] * (2.0 / w) / nd**2
         gy = npn * (n[splat] @ u) / proj[1] * (2.0 / h) / nd**2
-    slope = np.where(hit & (counts[splat] > 1), np.hypot(gx, gy) / (far - near), 0.0)
+    reaching = counts > 1
+    if cloud.sheet is not None and params.AA_SHEET_REACH:
+        reaching = reaching | cloud.sheet
+    slope = np.where(hit & reaching[splat], np.hypot(gx, gy) / (far - near), 0.0)
     extra = np.minimum(slope * params.AA_SURFACE_REACH, zhi - zlo)
     view_dir = -p / np.linalg.norm(p, axis=1, keepdims=True)
     rgb = np.clip(shade_np(n, view_dir, cloud.kd, cloud.ks, cloud.shininess, view.lighting, cloud.coherence), 0.0, 1.0)
@@ -331,17 +344,24 @@ def subpixel_fragments_np(cloud: PointCloud, view: FrameView, opts: SplatOptions
     slicing = mask_slicing(view, float(corner_depth.min()), float(corner_depth.max()), float(np.median(full_size)),
                            opts)  # fmt: skip
     pixel = (h - 1 - iy) * w + ix
+    if cloud.sheet is not None:
+        # A two-sided sheet's fragment reaches only where it grazes the ray.
+        two = cloud.sheet[splat] & (counts[splat] <= 1)
+        extra = np.where(two & (extra * slicing[1] < params.AA_SHEET_GRAZE * slicing[2]), 0.0, extra)
     reach = z + extra
     return Fragments(pixel, cov, z, rgb[splat], (w, h), slicing, counts[splat], reach)
 
 
 def surfaces_np(pixel: np.ndarray, slice_index: np.ndarray, n_pixels: int, span: float,
-                first_end: np.ndarray | None = None):  # fmt: skip
+                first_end: np.ndarray | None = None, chained: np.ndarray | None = None):  # fmt: skip
     """The surfaces of each pixel (rule steps 2 and 3): (starts, count), with
     ``starts`` (n_pixels, S) float64 the first slice of each surface front to
     back (inf past the last) and ``count`` (n_pixels,) how many there are.
     ``first_end`` (n_pixels,): the nearest surface takes every slice below
-    this when it lies farther than its first slice plus ``span``."""
+    this when it lies farther than its first slice plus ``span``; where
+    ``chained`` (n_pixels,) bool, only the slices chained to its span, each
+    less than :data:`~aniso3d.rendering.splat.params.AA_SHEET_CHAIN` spans
+    beyond the one before."""
     occupied = np.zeros((n_pixels, AA_SLICES), bool)
     occupied[pixel, slice_index] = True
     column = np.arange(AA_SLICES)
@@ -355,7 +375,19 @@ def surfaces_np(pixel: np.ndarray, slice_index: np.ndarray, n_pixels: int, span:
         first = np.where(found, np.argmax(later, axis=1), np.inf)
         limit = np.where(found, first + span, np.inf)
         if not starts and first_end is not None:
-            limit = np.where(found, np.maximum(limit, first_end), limit)
+            end = np.where(found, np.maximum(limit, first_end), limit)
+            if chained is not None:
+                gap = params.AA_SHEET_CHAIN * span
+                chain = chained & found & (end > limit)
+                if chain.any():
+                    # Each taken slice extends the surface, front to back.
+                    lo, hi = int(first[chain].min()), int(min(np.ceil(end[chain].max()), AA_SLICES))
+                    link = limit.copy()
+                    for col in range(lo, hi):
+                        taken = chain & occupied[:, col] & (col < link)
+                        link = np.where(taken, np.maximum(link, np.minimum(col + gap, end)), link)
+                    end = np.where(chain, link, end)
+            limit = end
         starts.append(first)
     starts_arr = np.stack(starts, axis=1) if starts else np.full((n_pixels, 1), np.inf)
     return starts_arr, np.isfinite(starts_arr).sum(axis=1)
@@ -405,7 +437,10 @@ def fragment_surfaces(frags: Fragments) -> tuple[np.ndarray, np.ndarray, np.ndar
         np.minimum.at(least, pixel, np.asarray(frags.reach, np.float64)[keep])
         with np.errstate(invalid="ignore"):
             first_end = np.floor((least - lo) * scale) + span
-    starts, count = surfaces_np(pixel, s, w * h, span, first_end)
+    # Pixels without a closed surface seen from outside chain their reach.
+    counted = np.ones(len(pixel)) if frags.counts is None else np.asarray(frags.counts, np.float64)[keep]
+    chained = np.bincount(pixel, counted > 1, w * h) == 0
+    starts, count = surfaces_np(pixel, s, w * h, span, first_end, chained)
     return keep, s, starts, count
 
 
