@@ -10,6 +10,9 @@
 //   away from the eye), in_kd (RGB), in_spec = (ks, shininess), the sign bit
 //   of ks set for a point of a surface sheet (aniso3d.build.points.PointCloud.sheet:
 //   with AA and SHEET_REACH its surface reaches as a one-sided point's does).
+//   A point with clip planes has in_spec.y negated (its sign bit set):
+//   quality "high" skips it here and draws it from the cloud's cut upload,
+//   with CLIPS: its two clip planes from u_clip_table (see clip_inputs()).
 // Out: SplatData (splat_data.glsl; all flat), and
 //   SPRITE path (default): gl_Position at the box centre and a gl_PointSize
 //   covering the box; splats whose box is wider than u_max_sprite, or with
@@ -124,15 +127,29 @@ in float in_size;
 in vec3 in_kd;
 #endif
 in vec2 in_spec;
-#ifdef INSTANCED
-const vec3 in_clip0 = vec3(0.0);  // an instance's points are not cut
-const vec3 in_clip1 = vec3(0.0);
-#else
-// Two clip planes, each (code, o, phi): the half-space s x_a <= o, code
+#if defined(CLIPS) && !defined(INSTANCED)
+// A cut upload (aniso3d.rendering.splat.buffers.GPUPoints.cut): its points'
+// two clip planes, each (code, o, phi): the half-space s x_a <= o, code
 // s (a + 1) (0: none), phi the angle of the surface meeting the splat's there
-// (0: none; aniso3d.build.points.PointCloud.clips).
-in vec3 in_clip0;
-in vec3 in_clip1;
+// (0: none; aniso3d.build.points.PointCloud.clips); point i's in row i of the
+// table, two texels.
+uniform sampler2D u_clip_table;
+vec3 in_clip0 = vec3(0.0);
+vec3 in_clip1 = vec3(0.0);
+
+void clip_inputs() {
+    ivec2 at = ivec2(2 * (gl_VertexID % CLIP_TABLE_PER_ROW), gl_VertexID / CLIP_TABLE_PER_ROW);
+    in_clip0 = texelFetch(u_clip_table, at, 0).xyz;
+    in_clip1 = texelFetch(u_clip_table, at + ivec2(1, 0), 0).xyz;
+}
+#else
+const vec3 in_clip0 = vec3(0.0);  // no point is cut (an instance's never are)
+const vec3 in_clip1 = vec3(0.0);
+#endif
+// A point with clip planes has its shininess negated in the cloud's buffer
+// (the sign bit, -0.0 for 0): quality "high" draws it from the cut upload.
+#if defined(AA) && !defined(CLIPS) && !defined(INSTANCED)
+#define SKIP_CUT 1
 #endif
 
 out SplatData SPLAT_DATA vs_out;
@@ -154,6 +171,28 @@ void cull() {
 #else
     gl_Position = vec4(0.0, 0.0, 2.0, 1.0);  // outside the clip volume
     gl_PointSize = 1.0;
+#endif
+}
+
+// cull() for splats dropped here and there among drawn ones (hidden at a
+// crease, drawn from the cut upload): one vertex outside the clip volume
+// sends llvmpipe's whole batch of vertices down its clipping path (the
+// default tree's high frame cost a fifth more for 0.3 % of its points), so
+// with AA such a splat is a point inside the volume, spread over the image
+// by its index (no one tile gets them all), whose one fragment splat.frag
+// discards at once (the box it may draw, clip, is empty). Splats dropped in
+// runs (a closed surface's back, off screen) keep cull(): a batch of them
+// all outside costs little, and each of their points inside would cost a
+// fragment.
+void cull_scattered() {
+#if defined(AA) && !defined(GEOMETRY_PATH)
+    ivec2 size = ivec2(u_viewport);
+    ivec2 px = ivec2(gl_VertexID % size.x, (gl_VertexID / size.x) % size.y);
+    gl_Position = vec4((vec2(px) + 0.5) / u_viewport * 2.0 - 1.0, 0.0, 1.0);
+    gl_PointSize = 1.0;
+    vs_out.clip = vec4(1.0, 1.0, 0.0, 0.0);
+#else
+    cull();
 #endif
 }
 
@@ -205,11 +244,19 @@ vec3 cut_line(vec2 c, vec3 t, vec3 b, vec2 h) {
 void main() {
 #ifdef INSTANCED
     instance_inputs();
+#elif defined(CLIPS)
+    clip_inputs();
+#endif
+#ifdef SKIP_CUT
+    if (floatBitsToUint(in_spec.y) >= 0x80000000u) {  // drawn from the cut upload
+        cull_scattered();
+        return;
+    }
 #endif
     vec3 n = normalize(in_normal);  // its length is the point's coherence
     // ks's sign bit marks a point of a surface sheet (also on ks = -0.0).
     bool sheet = (floatBitsToUint(in_spec.x) & 0x80000000u) != 0u;
-    vec2 spec = vec2(abs(in_spec.x), in_spec.y);
+    vec2 spec = vec2(abs(in_spec.x), abs(in_spec.y));
     vec3 helper = abs(n.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0);
     vec3 t = normalize(cross(n, helper));
     vec3 b = cross(n, t);
@@ -220,7 +267,7 @@ void main() {
 #ifdef AA
     // A splat hidden behind the surface meeting it at a clip plane is not drawn.
     if (hidden_at(in_clip0, n, u_q0 - u_t0 * u_ray[0]) || hidden_at(in_clip1, n, u_q0 - u_t0 * u_ray[0])) {
-        cull();
+        cull_scattered();
         return;
     }
 #endif

@@ -17,6 +17,7 @@ import pytest
 
 from aniso3d import PointCloud, ResourceError
 from aniso3d.build.mesh import Mesh
+from aniso3d.build.pyramid import LodPoints, pyramid
 from aniso3d.build.texture import build_texture
 from aniso3d.rendering.camera import Camera
 from aniso3d.rendering.frame import FrameView
@@ -55,12 +56,13 @@ def points_of(mesh: Mesh) -> tuple:
     return tex, texture_points(tex)
 
 
-def draw_alpha(r, cloud: PointCloud, cam: Camera) -> tuple[np.ndarray, FrameView]:
-    """(H, W) float32 alpha of ``cloud`` drawn with quality "high", row 0 at the top."""
-    near, far = cam.clip_range(cloud.bounds)
-    view = FrameView(cam, r.lighting, SIZE, near, far)
+def draw_rgba(r, cloud: PointCloud | LodPoints, cam: Camera, **options) -> tuple[np.ndarray, FrameView]:
+    """(H, W, 4) float32 RGBA of ``cloud`` drawn with ``options`` (quality
+    "high" unless given), row 0 at the top."""
     impl = r.method_renderer("splat")
     handle = impl.upload(cloud)
+    near, far = cam.clip_range(handle.bounds)
+    view = FrameView(cam, r.lighting, SIZE, near, far)
     ctx = r.gl.ctx
     col, dep = ctx.texture(SIZE, 4, dtype="f4"), ctx.depth_texture(SIZE)
     fbo = ctx.framebuffer([col], dep)
@@ -68,13 +70,20 @@ def draw_alpha(r, cloud: PointCloud, cam: Camera) -> tuple[np.ndarray, FrameView
         fbo.use()
         ctx.viewport = (0, 0, *SIZE)
         fbo.clear(*r.lighting.background, 0.0, depth=1.0)
-        impl.draw(handle, view, fbo=fbo, quality="high")
+        impl.draw(handle, view, fbo=fbo, **{"quality": "high", **options})
         img = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(SIZE[1], SIZE[0], 4)
     finally:
         for obj in (fbo, col, dep):
             obj.release()
         impl.release(handle)
-    return img[::-1, :, 3].copy(), view
+    return img[::-1].copy(), view
+
+
+def draw_alpha(r, cloud: PointCloud | LodPoints, cam: Camera, **options) -> tuple[np.ndarray, FrameView]:
+    """(H, W) float32 alpha of ``cloud`` drawn with quality "high" (and
+    ``options``), row 0 at the top."""
+    img, view = draw_rgba(r, cloud, cam, **options)
+    return img[..., 3].copy(), view
 
 
 def hit_points(view: FrameView, z: float) -> np.ndarray:
@@ -211,6 +220,37 @@ def test_no_coverage_past_a_walls_end(r, distance, side):
         assert before[past].max() > 0.1, before[past].max()
 
 
+@pytest.mark.parametrize("pixel_error", [8.0, 16.0, 32.0])
+def test_no_coverage_past_a_walls_end_at_every_level(r, pixel_error):
+    """The same wall drawn close up through its pyramid (level of detail),
+    with screen-space errors that draw levels 0 and 1, 1, and 2 (voxels up
+    to 4 times as wide: the wall's ends still on their grid planes): each
+    level's points are cut at their own voxels' faces; uncut
+    (``clips=False``) their discs reach past the ends."""
+    z = 0.5 + H / 2
+    tex, _ = points_of(quad(0.25, 0.75, 0.125, 0.5, z))
+    pyr = pyramid(tex)
+    cam = Camera((0.62, 0.75, z + 1.0), (0.5, 0.3, z), fov=40.0)
+    impl = r.method_renderer("splat")
+    handle = impl.upload(LodPoints(pyr))
+    try:
+        near, far = cam.clip_range(handle.bounds)
+        levels = impl.select(handle, FrameView(cam, r.lighting, SIZE, near, far), pixel_error)["points_per_level"]
+        assert handle.n_clipped > 0 and sum(levels[1:]) > 0, levels  # coarser levels drawn, with clip planes
+    finally:
+        impl.release(handle)
+    alpha, view = draw_alpha(r, LodPoints(pyr), cam, pixel_error=pixel_error)
+    hit = hit_points(view, z)
+    px = 0.75 * px_size(view, z) / abs(float(np.asarray(view.camera.forward)[2]))
+    past = (hit[..., 1] > 0.5 + px) | (hit[..., 0] > 0.75 + px) | (hit[..., 0] < 0.25 - px) | (hit[..., 1] < 0.125 - px)
+    inside = (hit[..., 1] < 0.5 - 2 * px) & (hit[..., 1] > 0.125 + 2 * px) & (np.abs(hit[..., 0] - 0.5) < 0.25 - 2 * px)
+    assert past.sum() > 100 and inside.sum() > 20
+    assert alpha[past].max() < 1e-3, alpha[past].max()
+    assert alpha[inside].min() > 0.9, alpha[inside].min()
+    before, _ = draw_alpha(r, LodPoints(pyr, clips=False), cam, pixel_error=pixel_error)
+    assert before[past].max() > 0.1, before[past].max()
+
+
 def test_a_square_sheets_alpha_is_its_projected_area(r):
     """A square on grid planes seen minified at a slant (voxels of about 0.7
     px, every splat a sub-pixel box): alpha sums to its projected area (within
@@ -256,3 +296,64 @@ def test_gpu_matches_the_twin_with_cut_splats(r):
     frags = subpixel_fragments_np(cloud, view, SplatOptions(quality="high"))
     rgb, alpha = composite_np(frags, view.lighting.background)
     assert np.abs(img_alpha - alpha).max() < 2e-4, np.abs(img_alpha - alpha).max()
+
+
+def test_each_point_reads_its_own_clip_planes(r):
+    """Few points with clip planes, scattered through the cloud and uploaded
+    in Morton order (not the cloud's): each plane passes near its own
+    splat, at its own offset, so a point reading another point's table row
+    (the next, the previous) is cut elsewhere or not at all, and the GPU's
+    image leaves the twin's."""
+    cam = Camera((0.0, 0.0, 3.0), (0.0, 0.0, 0.0), fov=40.0)
+    px = 3.0 * 2 * math.tan(math.radians(20.0)) / SIZE[1]
+    rng = np.random.default_rng(11)
+    g = (np.arange(-18, 18) * 2.5 + 0.3) * px  # apart: each splat's alpha is its own
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    n = x.size  # 1296 points
+    order = rng.permutation(n)
+    pos = np.c_[x[order], y[order], np.zeros(n)]
+    cut = rng.random(n) < 0.15
+    clips = np.zeros((n, 2, 5))
+    axis = rng.integers(0, 2, n)
+    sign = np.where(rng.random(n) < 0.5, 1.0, -1.0)
+    clips[cut, 0, axis[cut]] = sign[cut]
+    clips[cut, 0, 3] = sign[cut] * pos[cut, axis[cut]] + rng.uniform(0.05, 0.5, cut.sum()) * px
+    cloud = PointCloud(pos, np.tile([0.0, 0.0, 1.0], (n, 1)), np.full(n, (1.0 * px) ** 2),
+                       rng.uniform(0.1, 0.9, (n, 3)), np.zeros(n), np.full(n, 8.0), clips=clips)  # fmt: skip
+    img_alpha, view = draw_alpha(r, cloud, cam)
+    frags = subpixel_fragments_np(cloud, view, SplatOptions(quality="high"))
+    _, alpha = composite_np(frags, view.lighting.background)
+    assert np.abs(img_alpha - alpha).max() < 2e-4, np.abs(img_alpha - alpha).max()
+    # Each point's planes moved to the next point with planes: the twin differs.
+    shifted = clips.copy()
+    idx = np.flatnonzero(cut)
+    shifted[idx] = clips[np.roll(idx, 1)]
+    wrong = PointCloud(pos, cloud.normals, cloud.areas, cloud.kd, cloud.ks, cloud.shininess, clips=shifted)
+    _, alpha_wrong = composite_np(subpixel_fragments_np(wrong, view, SplatOptions(quality="high")),
+                                  view.lighting.background)  # fmt: skip
+    assert np.abs(img_alpha - alpha_wrong).max() > 0.05
+
+
+@pytest.mark.parametrize("quality", ["blend", "fast"])
+def test_points_with_clip_planes_draw_as_before_below_high(r, quality):
+    """Qualities "blend" and "fast" do not cut: a cloud whose points (a
+    third of them, at random) have clip planes draws exactly as without
+    them, though those points' shininess is negated in the upload to mark
+    them for quality "high", which draws them apart (its images are held to
+    the twin above)."""
+    cam = Camera((0.3, 0.2, 3.0), (0.0, 0.0, 0.0), fov=40.0)
+    rng = np.random.default_rng(4)
+    n = 3000
+    pos = rng.uniform(-0.6, 0.6, (n, 3))
+    nrm = rng.normal(size=(n, 3))
+    clips = np.zeros((n, 2, 5))
+    cut = rng.random(n) < 0.33
+    clips[cut, 0, 0] = 1.0
+    clips[cut, 0, 3] = 0.0  # x <= 0: through the cloud
+    args = (pos, nrm, np.full(n, 0.03**2), rng.uniform(0.1, 0.9, (n, 3)), np.full(n, 0.5),
+            rng.choice([0.0, 8.0, 40.0], n))  # fmt: skip
+    plain, with_planes = PointCloud(*args), PointCloud(*args, clips=clips)
+    a, _ = draw_rgba(r, plain, cam, quality=quality)
+    b, _ = draw_rgba(r, with_planes, cam, quality=quality)
+    assert a[..., 3].sum() > 100
+    assert np.array_equal(a, b)

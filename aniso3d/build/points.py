@@ -161,9 +161,15 @@ class PointCloud:
     def nbytes(self) -> int:
         """Bytes as uploaded for rendering: float32 position, normal, radius,
         RGB, ks, n = 12 floats per point (the coherence rides as the uploaded
-        normal's length), and 6 more where the cloud has clip planes (two,
-        each an axis code, an offset and an angle)."""
-        return int(len(self) * (12 if self.clips is None else 18) * 4)
+        normal's length), and for each point with clip planes 18 more: its
+        12 again and its two planes (each an axis code, an offset and an
+        angle), quality "high" drawing those points apart
+        (aniso3d.rendering.splat.buffers.GPUPoints.cut)."""
+        n = len(self)
+        if self.clips is None:
+            return int(n * 12 * 4)
+        cut = int(np.any(self.clips[..., :3] != 0, axis=(1, 2)).sum())
+        return int((n * 12 + cut * 18) * 4)
 
     def total_area(self) -> float:
         return float(self.areas.sum())

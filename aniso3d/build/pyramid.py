@@ -388,13 +388,18 @@ class LodPoints:
     those :func:`~aniso3d.rendering.select.select_voxels` chooses.
 
     ``per_entry`` is a whole number or ``"adaptive"``; ``placement`` and
-    ``normal`` as for :meth:`AnisoTexture.to_points`.
+    ``normal`` as for :meth:`AnisoTexture.to_points`. ``clips``: the upload
+    gives each level's points the clip planes of that level's texture
+    (:mod:`aniso3d.rendering.splat.clips`: quality "high" cuts a splat where
+    its surface ends), as the renderer gives a texture's points; False: the
+    level clouds as they are.
     """
 
     pyramid: Pyramid
     placement: str = "centroid"
     per_entry: int | str = 1
     normal: str = "mean"
+    clips: bool = True
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "pyramid", as_pyramid(self.pyramid))

@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aniso3d.grid import cell_keys
+from aniso3d.grid import cell_keys, ranges
 
 #: A sheet's plane passing within this (voxel units) of an edge's midpoint
 #: on a voxel face meets the edge (continues the surface or creases it).
@@ -206,54 +206,80 @@ def sheet_edges(texture, sheets, surface: np.ndarray) -> SheetEdges:
     # Sheets meeting an edge across: (pair, entry, its offset, distance).
     meets: list[tuple[np.ndarray, ...]] = []
     # The 9 voxels across each face (the face's neighbour and its 8 around),
-    # then the voxel itself (offset 0).
+    # then the voxel itself (offset 0), as the cell offset of each face (6,
+    # 10, 3). Most edges are continued by the face's neighbour (a surface
+    # goes on): that step is tried first, and a pair found continued is
+    # dropped from every later step (its kind and partner are never used).
+    # The other pairs see every step in this order, so their partners (the
+    # nearest sheet, the first in this order on a tie) stay as they were.
     steps = [(u, v) for u in (-1, 0, 1) for v in (-1, 0, 1)]
+    step_delta = np.zeros((6, len(steps) + 1, 3), dtype=np.int64)
+    for f6 in range(6):
+        a6, s6 = f6 // 2, f6 % 2
+        for j, (u, v) in enumerate(steps):
+            step_delta[f6, j, a6] = 2 * s6 - 1
+            step_delta[f6, j, (a6 + 1) % 3] = u
+            step_delta[f6, j, (a6 + 2) % 3] = v
+    ahead = steps.index((0, 0))
+
+    def neighbours(pairs: np.ndarray, j: int):
+        """The entries of the voxel at step ``j`` of each of ``pairs`` (pair
+        indices into the chunk) as rows: (the row's pair, its entry; the
+        step's cell offset and row count of each pair with a voxel there;
+        the entry's plane's distance to the edge's midpoint, |n . n'|)."""
+        delta = step_delta[f[pairs], j]
+        nb_cell = cell[pairs] + delta
+        inside = np.all((nb_cell >= 0) & (nb_cell < shape), axis=1)
+        key = cell_keys(np.where(inside[:, None], nb_cell, 0), shape)
+        pos = np.minimum(np.searchsorted(keys, key), len(keys) - 1)
+        vox = np.where(inside & (keys[pos] == key), pos, -1)
+        hit = np.flatnonzero(vox >= 0)
+        lo, hi = offsets[vox[hit]], offsets[vox[hit] + 1]
+        counts = hi - lo
+        which = pairs[np.repeat(hit, counts)]
+        other = ranges(lo, hi)
+        local = (m[pairs[hit]] - delta[hit])[np.repeat(np.arange(len(hit)), counts)]
+        no = nh[other]
+        dist = np.abs(np.einsum("ek,ek->e", no, local) - d[other])
+        along = np.abs(np.einsum("ek,ek->e", no, nr[which]))
+        return which, other, delta[hit], counts, dist, along
+
     for start in range(0, len(pr), _CHUNK):
         sl = slice(start, start + _CHUNK)
         r, f, m = pr[sl], pf[sl], pm[sl]
-        a, side = f // 2, f % 2
-        b, c = (a + 1) % 3, (a + 2) % 3
         cell = coords[owner[r]]
-        for step in [*steps, None]:
-            across = step is not None
-            delta = np.zeros((len(r), 3), dtype=np.int64)
-            if across:
-                delta[np.arange(len(r)), a] = 2 * side - 1
-                delta[np.arange(len(r)), b] = step[0]
-                delta[np.arange(len(r)), c] = step[1]
-            nb_cell = cell + delta
-            inside = np.all((nb_cell >= 0) & (nb_cell < shape), axis=1)
-            key = cell_keys(np.where(inside[:, None], nb_cell, 0), shape)
-            pos = np.searchsorted(keys, key)
-            pos = np.minimum(pos, len(keys) - 1)
-            vox = np.where(inside & (keys[pos] == key), pos, -1)
-            pair = np.flatnonzero(vox >= 0)
-            if len(pair) == 0:
-                continue
-            counts = offsets[vox[pair] + 1] - offsets[vox[pair]]
-            which = np.repeat(pair, counts)
-            first = np.repeat(offsets[vox[pair]] - np.concatenate([[0], np.cumsum(counts)[:-1]]), counts)
-            other = first + np.arange(int(counts.sum()))
-            local = m[which] - delta[which]
-            dist = np.abs(np.einsum("ek,ek->e", nh[other], local) - d[other])
+        nr = nh[r]
+        alive = np.ones(len(r), dtype=bool)
+        # The face's neighbour first: only whether it continues the edge.
+        which, other, _, _, dist, along = neighbours(np.arange(len(r)), ahead)
+        alive[which[(dist <= EDGE_NEAR) & has_plane[other] & (along >= EDGE_PARALLEL)]] = False
+        for j in range(len(steps) + 1):
+            across = j < len(steps)
+            pairs = np.flatnonzero(alive)
+            if len(pairs) == 0:
+                break
+            which, other, delta, counts, dist, along = neighbours(pairs, j)
             near = (dist <= EDGE_NEAR) & has_plane[other]
-            parallel = np.abs(np.einsum("ek,ek->e", nh[other], nh[r[which]])) >= EDGE_PARALLEL
+            parallel = along >= EDGE_PARALLEL
             if across:
-                np.logical_or.at(continued, start + which, near & parallel)
+                alive[which[near & parallel]] = False
                 crossing = near
             else:
                 # In the voxel itself only another surface (not the sheet's
                 # own layers) meets an edge.
                 crossing = near & ~parallel & (other != r[which])
-            np.logical_or.at(met, start + which, crossing)
+            met[start + which[crossing]] = True
             k = np.flatnonzero(crossing & ~parallel)
-            meets.append((start + which[k], other[k], delta[which[k]], dist[k]))
+            meets.append((start + which[k], other[k], np.repeat(delta, counts, axis=0)[k], dist[k]))
+        continued[sl] = ~alive
     # A crease's partner: the nearest sheet meeting it; the angle phi of its
     # half-plane about the edge, from the sheet's own (u, in its plane into
     # the voxel, towards n): u2 = cos(phi) u + sin(phi) n.
     phi = np.zeros(len(pr))
     if meets:
         q, other, delta, dist = (np.concatenate(x) for x in zip(*meets, strict=True))
+        own = ~continued[q]
+        q, other, delta, dist = q[own], other[own], delta[own], dist[own]
         order = np.lexsort((dist, q))
         first = order[np.r_[True, q[order][1:] != q[order][:-1]]] if len(order) else order
         q, other, delta = q[first], other[first], delta[first]

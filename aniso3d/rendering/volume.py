@@ -521,18 +521,24 @@ def _sections(normal: np.ndarray, local: np.ndarray) -> tuple[np.ndarray, np.nda
     """Unit normals, offsets and section areas of the planes through the
     voxel-local points ``local`` (N, 3) normal to ``normal`` (N, 3, any
     length; 0: no plane, section 0)."""
-    length = np.linalg.norm(normal, axis=1)
+    # Sums over the 3 columns written out, in the order sum(axis=1) adds
+    # them (the same values, without a reduction's overhead per row).
+    normal = np.asarray(normal, dtype=np.float64)
+    sq = normal * normal
+    length = np.sqrt(sq[:, 0] + sq[:, 1] + sq[:, 2])
     ok = length > 1e-6
     nh = np.where(ok[:, None], normal / np.where(ok, length, 1.0)[:, None], 0.0)
     # The outer cells are unbounded (clip.py): keep the plane on the cube.
-    lo, hi = np.minimum(nh, 0).sum(1), np.maximum(nh, 0).sum(1)
-    d = np.clip(np.sum(nh * local, axis=1), lo, hi)
+    neg, pos, mag = np.minimum(nh, 0), np.maximum(nh, 0), np.abs(nh)
+    lo, hi = neg[:, 0] + neg[:, 1] + neg[:, 2], pos[:, 0] + pos[:, 1] + pos[:, 2]
+    dots = nh * local
+    d = np.clip(dots[:, 0] + dots[:, 1] + dots[:, 2], lo, hi)
     # A plane on a voxel face (a box's side on a grid plane) keeps the whole
     # face as its section however its normal and centroid were rounded: the
     # section of a plane that tilts by at most SHEET_EPS across the voxel is
     # taken SHEET_EPS inside, where rays count its crossings too. Without it
     # a tilt of 1e-6 halves it (the side tilted out is lost).
-    flat = np.abs(nh).sum(1) - np.abs(nh).max(1) <= SHEET_EPS
+    flat = mag[:, 0] + mag[:, 1] + mag[:, 2] - np.maximum(np.maximum(mag[:, 0], mag[:, 1]), mag[:, 2]) <= SHEET_EPS
     inner = np.where(flat, np.clip(d, lo + SHEET_EPS, hi - SHEET_EPS), d)
     return nh, d, np.where(ok, plane_section_area(nh, inner), 0.0)
 
@@ -587,6 +593,24 @@ def covered_area(texture: AnisoTexture, rows: np.ndarray | slice = slice(None)) 
     return np.asarray(texture.entry_area, dtype=np.float64)[rows] * np.asarray(texture.entry_cover, np.float64)[rows]
 
 
+def _largest_per_group(value: np.ndarray, group: np.ndarray) -> np.ndarray:
+    """Index of the largest ``value`` of each group in ``group`` (both (N,)),
+    the last such index on a tie, groups in ascending order: the last of
+    each group in ``np.lexsort((value, group))``, without the sort where
+    ``group`` is already ascending (a texture's entries are grouped by voxel)."""
+    group = np.asarray(group)
+    if len(group) == 0:
+        return np.zeros(0, dtype=np.int64)
+    if np.any(group[1:] < group[:-1]):
+        order = np.lexsort((value, group))
+        return order[np.r_[group[order][1:] != group[order][:-1], True]]
+    start = np.flatnonzero(np.r_[True, group[1:] != group[:-1]])
+    top = np.maximum.reduceat(value, start)
+    size = np.diff(np.r_[start, len(group)])
+    cand = np.flatnonzero(value == np.repeat(top, size))
+    return cand[np.r_[group[cand][1:] != group[cand][:-1], True]]
+
+
 def entry_sheets(texture: AnisoTexture, voxels: np.ndarray | None = None) -> EntrySheets:
     """The sheets of ``texture``'s entries (see :class:`EntrySheets`), derived
     from what every texture stores (entry area, mean normal, centroid), so
@@ -617,9 +641,7 @@ def entry_sheets(texture: AnisoTexture, voxels: np.ndarray | None = None) -> Ent
     # against the voxel's largest entry and lying in its plane (within
     # SHEET_FLIP_GAP) is turned to its side first; the two faces of a thin
     # slab, a voxel's width apart, and leaves at random are left as they are.
-    order = np.lexsort((area, owner))
-    last = np.r_[owner[order][1:] != owner[order][:-1], True] if len(order) else np.zeros(0, bool)
-    big = order[last]
+    big = _largest_per_group(area, owner)
     ref_n, ref_c = np.zeros((V, 3)), np.zeros((V, 3))
     ref_n[owner[big]], ref_c[owner[big]] = nh[big], local[big]
     facing = np.einsum("ek,ek->e", nh, ref_n[owner])

@@ -23,6 +23,7 @@ from aniso3d.grid import ranges
 from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.frame import FrameView
 from aniso3d.rendering.select import select_voxels
+from aniso3d.rendering.splat.clips import clipped
 from aniso3d.rendering.splat.geometry import morton_order
 
 #: Points per block of the CPU's large-splat test (points are Morton-sorted, so
@@ -34,27 +35,38 @@ ATTRIB_PER_ROW = 2048
 ATTRIBUTES = (("in_position", 3), ("in_normal", 3), ("in_size", 1), ("in_kd", 3), ("in_spec", 2))
 #: float32 values per point in the vertex buffer.
 FLOATS_PER_POINT = sum(k for _, k in ATTRIBUTES)
-#: The clip planes' attributes, in a buffer of their own made only for a cloud
-#: that has them (:attr:`~aniso3d.build.points.PointCloud.clips`; without it
-#: the shader reads OpenGL's default (0, 0, 0): none): ``in_clip0`` and
-#: ``in_clip1`` in the local frame, each (code, o, phi), the half-space
-#: ``s x_a <= o`` with code ``s (a + 1)`` (0: none).
-CLIP_ATTRIBUTES = (("in_clip0", 3), ("in_clip1", 3))
-#: float32 values per point in the clip planes' buffer.
-CLIP_FLOATS_PER_POINT = sum(k for _, k in CLIP_ATTRIBUTES)
-
+#: Clip planes (:attr:`~aniso3d.build.points.PointCloud.clips`) are few (a
+#: surface's ends: 0.3 % of the tree's points, 12 % of the room's), and the
+#: code that cuts a splat by them costs llvmpipe about a third of a high frame's
+#: vertex work for every point it runs on, planes or none (it runs every
+#: branch for every lane). So the points with planes are drawn apart: in the
+#: cloud's buffer their shininess is negated (its sign bit set; splat.vert
+#: reads its absolute value) and quality "high" skips them there; a second,
+#: small upload (:attr:`GPUPoints.cut`) holds them again, in buffer order,
+#: with their planes as rows of a table, the row of a point its index there:
+#: per plane (code, o, phi), the half-space ``s x_a <= o`` in the local frame,
+#: code ``s (a + 1)``, 0: none (:func:`clip_attributes`), two RGB32F texels a
+#: row, :data:`CLIP_TABLE_PER_ROW` rows a texture row.
+CLIP_TABLE_PER_ROW = 2048
+#: float32 values per row of the clip table.
+CLIP_FLOATS_PER_ROW = 6
+#: Texture unit of the clip table while the cut points are drawn (the passes
+#: of quality "high" sample no other textures).
+CLIP_TABLE_UNIT = 7
 
 
 @dataclass(eq=False)
 class GPUPoints:
-    """A point cloud uploaded once: 12 float32 per point (6 more in ``clip_vbo``
-    for a cloud with clip planes), positions relative to
+    """A point cloud uploaded once: 12 float32 per point, positions relative to
     ``origin``, Morton-sorted, in blocks of :data:`BLOCK` points; and the
     per-point shading attributes again as a texture (two RGBA32F texels per
     point, :data:`ATTRIB_PER_ROW` points per row) for the deferred shading pass.
 
     ``block_lo``/``block_hi`` (B, 3) are the blocks' position bounds in the
-    local frame and ``block_size`` (B,) their largest ``sqrt(area)``.
+    local frame and ``block_size`` (B,) their largest ``sqrt(area)``. A cloud
+    with clip planes has the points that have them uploaded again in ``cut``
+    (their indices here ``cut_ids``, ascending; ``cut_mask`` (N,) marks them),
+    whose ``clip_table`` holds their planes (:data:`CLIP_TABLE_PER_ROW`).
     """
 
     vbo: moderngl.Buffer
@@ -71,8 +83,18 @@ class GPUPoints:
     vaos: dict = field(default_factory=dict)
     #: Median ``sqrt(area)`` of the points (of level 0 for a pyramid).
     typical_size: float = 0.0
-    #: The clip planes (:data:`CLIP_ATTRIBUTES`), None for a cloud without.
-    clip_vbo: moderngl.Buffer | None = None
+    #: The points with clip planes, uploaded again (None: none), and where
+    #: they lie in this upload.
+    cut: GPUPoints | None = None
+    cut_ids: np.ndarray | None = None
+    cut_mask: np.ndarray | None = None
+    #: A cut upload's planes, a row per point (:data:`CLIP_TABLE_PER_ROW`).
+    clip_table: moderngl.Texture | None = None
+
+    @property
+    def n_clipped(self) -> int:
+        """Points with clip planes."""
+        return 0 if self.cut is None else self.cut.n_points
 
 
 @dataclass(eq=False)
@@ -153,20 +175,36 @@ def clip_attributes(clips: np.ndarray, origin) -> np.ndarray:
     return np.stack([sign * (axis + 1), np.where(sign != 0, local, 0.0), angle], axis=-1).astype(np.float32)
 
 
+def _texture_rows(data: np.ndarray, per_row: int) -> tuple[np.ndarray, tuple[int, int]]:
+    """``data`` (n, c) padded with zero rows to whole texture rows of
+    ``per_row`` entries (one row of n, at least 1, if n is less), and the
+    texture's size in entries."""
+    per_row = min(per_row, max(1, len(data)))
+    rows = max(1, -(-len(data) // per_row))
+    out = np.zeros((rows * per_row, *data.shape[1:]), dtype=data.dtype)
+    out[: len(data)] = data
+    return out, (per_row, rows)
+
+
 def _upload_arrays(
-    gl: GLContext, cls, arrays, order, bounds, origin, one_sided=None, clips=None, sheet=None, **extra
+    gl: GLContext, cls, arrays, order, bounds, origin, one_sided=None, clips=None, sheet=None, attrib=True,
+    **extra,
 ) -> GPUPoints:
     """Upload the points ``order`` of ``arrays`` (positions, normals,
     areas, kd, ks, shininess), in that order, relative to ``origin``; a
     ``one_sided`` point (:attr:`~aniso3d.build.points.PointCloud.one_sided`)
-    gets its size negated (splat.vert culls it where it faces away); ``clips``
-    (:attr:`~aniso3d.build.points.PointCloud.clips`, None: none) are moved to
-    the local frame; a ``sheet`` point (:attr:`~aniso3d.build.points.PointCloud.sheet`)
-    gets the sign bit of its ks set (-0.0 for ks 0; splat.vert reads it)."""
+    gets its size negated (splat.vert culls it where it faces away); a
+    ``sheet`` point (:attr:`~aniso3d.build.points.PointCloud.sheet`) gets the
+    sign bit of its ks set (-0.0 for ks 0; splat.vert reads it); the points
+    with ``clips`` (:attr:`~aniso3d.build.points.PointCloud.clips`, None:
+    none) get their shininess negated and are uploaded again, with their
+    planes in the local frame (:attr:`GPUPoints.cut`). ``attrib``: make the
+    attribute texture (only the deferred shading of quality "fast" reads it,
+    and it never draws a cut upload)."""
     positions, normals, areas, kd, ks, shininess = arrays
     n = len(order)
     rows = -(-n // ATTRIB_PER_ROW)
-    if rows > gl.max_texture_size:
+    if attrib and rows > gl.max_texture_size:
         raise ResourceError(
             f"{n} points need a {2 * ATTRIB_PER_ROW}x{rows} attribute texture, above this "
             f"OpenGL's limit of {gl.max_texture_size}; draw the cloud in parts"
@@ -180,21 +218,29 @@ def _upload_arrays(
     data[:, 7:10] = kd[order]
     data[:, 10] = ks[order] if sheet is None else np.where(sheet[order], np.copysign(ks[order], -1.0), ks[order])
     data[:, 11] = shininess[order]
-    clip_data = None
-    if clips is not None:
-        clip_data = clip_attributes(clips[order], origin).reshape(n, CLIP_FLOATS_PER_POINT)
-    attrib = np.zeros((rows * ATTRIB_PER_ROW, 8), dtype=np.float32)
-    attrib[:n, 0:3] = data[:, 3:6]
-    attrib[:n, 3] = ks[order]
-    attrib[:n, 4:7] = data[:, 7:10]
-    attrib[:n, 7] = data[:, 11]
     ctx = gl.ctx
+    tex, attrib_nbytes = None, 0
+    if attrib:
+        values = np.zeros((rows * ATTRIB_PER_ROW, 8), dtype=np.float32)
+        values[:n, 0:3] = data[:, 3:6]
+        values[:n, 3] = ks[order]  # plain: the sheet bit is for the high passes
+        values[:n, 4:7] = data[:, 7:10]
+        values[:n, 7] = data[:, 11]
+        tex = gl.track(ctx.texture((2 * ATTRIB_PER_ROW, rows), 4, values.tobytes(), dtype="f4"))
+        tex.filter = moderngl.NEAREST, moderngl.NEAREST
+        attrib_nbytes = values.nbytes
+    cut = cut_ids = cut_mask = None
+    if clips is not None:
+        clips = clips[order]
+        cut_mask = np.any(clips[..., :3] != 0, axis=(1, 2))
+        cut_ids = np.flatnonzero(cut_mask)
+        if len(cut_ids):
+            cut = _upload_cut(gl, cls, arrays, order[cut_ids], clips[cut_ids], bounds, origin,
+                              one_sided, sheet)  # fmt: skip
+            data[cut_ids, 11] = -data[cut_ids, 11]  # the sign bit: drawn apart (-0.0 for 0)
+        else:
+            cut_ids = cut_mask = None
     vbo = gl.track(ctx.buffer(data.tobytes()))
-    clip_vbo = None if clip_data is None else gl.track(ctx.buffer(clip_data.tobytes()))
-    tex = gl.track(
-        ctx.texture((2 * ATTRIB_PER_ROW, rows), 4, attrib.tobytes(), dtype="f4")
-    )
-    tex.filter = moderngl.NEAREST, moderngl.NEAREST
     start = np.arange(0, n, BLOCK)
     count = np.minimum(BLOCK, n - start)
     return cls(
@@ -203,8 +249,10 @@ def _upload_arrays(
         origin=origin,
         bounds=bounds,
         n_points=n,
-        nbytes=data.nbytes + attrib.nbytes + (0 if clip_data is None else clip_data.nbytes),
-        clip_vbo=clip_vbo,
+        nbytes=data.nbytes + attrib_nbytes + (0 if cut is None else cut.nbytes),
+        cut=cut,
+        cut_ids=cut_ids,
+        cut_mask=cut_mask,
         block_start=start,
         block_count=count,
         block_lo=np.minimum.reduceat(local, start, axis=0),
@@ -215,14 +263,38 @@ def _upload_arrays(
     )
 
 
+def _upload_cut(gl: GLContext, cls, arrays, order, clips, bounds, origin, one_sided, sheet=None) -> GPUPoints:
+    """The points ``order`` of ``arrays`` with clip planes ``clips`` (their
+    rows, in that order) as a :attr:`GPUPoints.cut` upload: the same origin,
+    no attribute texture, the planes in its ``clip_table`` (row i: point i)."""
+    table = clip_attributes(clips, origin).reshape(-1, CLIP_FLOATS_PER_ROW)
+    padded, (w, h) = _texture_rows(table, CLIP_TABLE_PER_ROW)
+    if h > gl.max_texture_size:
+        raise ResourceError(f"{len(table)} points' clip planes need a texture of {h} rows, above this "
+                            f"OpenGL's limit of {gl.max_texture_size}; draw the cloud in parts")  # fmt: skip
+    cut = _upload_arrays(gl, GPULodPoints if cls is GPULodPoints else GPUPoints, arrays, order, bounds, origin,
+                         one_sided, sheet=sheet, attrib=False)  # fmt: skip
+    cut.clip_table = gl.track(gl.ctx.texture((2 * w, h), 3, padded.tobytes(), dtype="f4"))
+    cut.clip_table.filter = moderngl.NEAREST, moderngl.NEAREST
+    cut.nbytes += padded.nbytes
+    if isinstance(cut, GPULodPoints):
+        cut.index_buffer = gl.track(gl.ctx.buffer(reserve=4 * max(cut.n_points, 1)))
+    return cut
+
+
 def upload_lod(gl: GLContext, lod: LodPoints) -> GPULodPoints:
     """Every level's points in one buffer: level by level, finest first,
-    voxels in Morton order of their cells, a voxel's points together."""
+    voxels in Morton order of their cells, a voxel's points together; with
+    ``lod.clips``, each with the clip planes of its level's texture
+    (:func:`~aniso3d.rendering.splat.clips.clipped`)."""
     pyr = lod.pyramid
     clouds, parts, rank, run_first, run_count, level_first = [], [], [], [], [], []
     base = 0
     for lvl in range(len(pyr)):
         cloud, off = lod.level_cloud(lvl)
+        if lod.clips and cloud.clips is None and len(cloud):
+            counts = pyr.adaptive_counts(lvl) if lod.per_entry == "adaptive" else lod.per_entry
+            cloud = clipped(cloud, pyr[lvl], None, counts)
         m = pyr[lvl].n_voxels
         vorder = morton_order(pyr[lvl].coords) if m > 1 else np.arange(m)
         counts = (off[vorder + 1] - off[vorder]).astype(np.int64)
@@ -317,6 +389,15 @@ def select(handle: GPULodPoints, view: FrameView, pixel_error: float = 1.0) -> d
         handle.frame_box = (box, float(handle.level_size[used].max()))
     else:
         handle.frame_box = None
+    cut = handle.cut
+    if cut is not None:  # the drawn points with clip planes, as indices into their own upload
+        mine = idx[handle.cut_mask[idx]]
+        cut.drawn = np.searchsorted(handle.cut_ids, mine).astype(np.uint32)
+        if cut.drawn.nbytes > cut.index_buffer.size:
+            cut.index_buffer.orphan(max(cut.drawn.nbytes, 2 * cut.index_buffer.size))
+        if cut.drawn.nbytes:
+            cut.index_buffer.write(cut.drawn)
+        cut.frame_box = handle.frame_box
     t2 = time.perf_counter()
     stats = {
         "points": int(len(idx)),
@@ -337,7 +418,9 @@ def select(handle: GPULodPoints, view: FrameView, pixel_error: float = 1.0) -> d
 
 def release_points(gl: GLContext, handle: GPUPoints) -> None:
     """Free an upload's GPU objects."""
-    gl.free(*handle.vaos.values(), handle.vbo, handle.attrib, *([handle.clip_vbo] if handle.clip_vbo else []))
+    if handle.cut is not None:
+        release_points(gl, handle.cut)
+    gl.free(*handle.vaos.values(), handle.vbo, *(t for t in (handle.attrib, handle.clip_table) if t is not None))
     handle.vaos.clear()
     if isinstance(handle, GPULodPoints):
         gl.free(*handle.indexed_vaos.values(), handle.index_buffer)

@@ -23,6 +23,8 @@ image and scaled back to its true area (all of which lies in the voxel).
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 from aniso3d.build.points import PointCloud
@@ -36,6 +38,13 @@ from aniso3d.rendering.volume import RUN_SHARE, EntrySheets, entry_sheets
 #: surface meets it there, a box's edge, a room's corner).
 CLIP_KINDS = (OPEN, CREASE)
 
+#: Per texture (held weakly) and kinds, the entries with clip planes and
+#: their planes: the points of one texture are made again for every
+#: placement, count and normal (the bench's sweeps, a renderer's options),
+#: and the planes, a few per cent of the entries, cost a sheet
+#: classification each time.
+_CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
 
 def entry_clips(
     texture: AnisoTexture, kinds: tuple[int, ...] = CLIP_KINDS, sheets: EntrySheets | None = None
@@ -45,13 +54,44 @@ def entry_clips(
     its voxel where its surface sheet's edges are of a kind in ``kinds``
     (:func:`~aniso3d.rendering.sheet_edges.sheet_edges`), and a crease's
     partner's angle ``phi`` about the edge from the sheet (0 for an open
-    edge; the sheet's normal is its entry's mean normal). ``sheets``: the
-    texture's :func:`~aniso3d.rendering.volume.entry_sheets`, if at hand."""
+    edge; the sheet's normal is its entry's mean normal). Computed once per
+    texture and ``kinds`` (a texture is not changed in place); ``sheets``:
+    the texture's :func:`~aniso3d.rendering.volume.entry_sheets`, if at hand."""
+    rows, planes = _clip_data(texture, tuple(int(k) for k in kinds), sheets)
+    out = np.zeros((texture.n_entries, MAX_EDGES, 5))
+    out[rows] = planes
+    return out
+
+
+def entry_sheet_flags(texture: AnisoTexture, sheets: EntrySheets | None = None) -> np.ndarray:
+    """(E,) bool: the entries of ``texture`` that are surface sheets (fill
+    their plane's section of the voxel, :data:`~aniso3d.rendering.volume.RUN_SHARE`),
+    computed once per texture."""
+    per_texture = _CACHE.setdefault(texture, {})
+    if "sheet" not in per_texture:
+        sheets = entry_sheets(texture) if sheets is None else sheets
+        per_texture["sheet"] = sheets.share >= RUN_SHARE
+    return per_texture["sheet"]
+
+
+def _clip_data(texture: AnisoTexture, key: tuple[int, ...], sheets: EntrySheets | None):
+    """The entries with clip planes of ``key``'s kinds and their planes, cached."""
+    per_texture = _CACHE.setdefault(texture, {})
+    if key not in per_texture:
+        sheets = entry_sheets(texture) if sheets is None else sheets
+        entry_sheet_flags(texture, sheets)
+        planes = _entry_clips(texture, key, sheets)
+        rows = np.flatnonzero(np.any(planes[..., :3] != 0, axis=(1, 2)))
+        per_texture[key] = (rows, planes[rows])
+    return per_texture[key]
+
+
+def _entry_clips(texture: AnisoTexture, kinds: tuple[int, ...], sheets: EntrySheets) -> np.ndarray:
+    """:func:`entry_clips`, computed."""
     E = texture.n_entries
     out = np.zeros((E, MAX_EDGES, 5))
     if E == 0:
         return out
-    sheets = entry_sheets(texture) if sheets is None else sheets
     edges = sheet_edges(texture, sheets, sheets.share >= RUN_SHARE)
     cut = (edges.face >= 0) & np.isin(edges.kind, kinds)
     row, k = np.nonzero(cut)
@@ -77,10 +117,9 @@ def clipped(
     """``cloud``, the points :func:`~aniso3d.build.texture.entry_points` made
     of ``texture`` with the same ``voxels`` and ``per_entry`` (in that
     order), with each point's :func:`entry_clips` planes."""
-    sheets = entry_sheets(texture)
-    planes = entry_clips(texture, kinds, sheets)
+    planes = entry_clips(texture, kinds)
     normal = np.asarray(texture.entry_normal, dtype=np.float64)
-    sheet = sheets.share >= RUN_SHARE
+    sheet = entry_sheet_flags(texture).copy()
     if voxels is not None:
         off = np.asarray(texture.entry_offsets, dtype=np.int64)
         v = np.asarray(voxels, dtype=np.int64)

@@ -25,7 +25,7 @@ from aniso3d.errors import ResourceError
 from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.frame import FrameView
 from aniso3d.rendering.splat import params
-from aniso3d.rendering.splat.buffers import ATTRIBUTES, CLIP_ATTRIBUTES, GPULodPoints, GPUPoints
+from aniso3d.rendering.splat.buffers import ATTRIBUTES, CLIP_TABLE_PER_ROW, CLIP_TABLE_UNIT, GPULodPoints, GPUPoints
 from aniso3d.rendering.splat.culling import depth_range, large_blocks
 from aniso3d.rendering.splat.geometry import mask_slicing
 from aniso3d.rendering.splat.options import SplatOptions
@@ -110,9 +110,13 @@ class SplatPipeline:
 
     # ------------------------------------------------------------ programs
 
-    def program(self, kind: str, shape: str, sprite: bool, aa: bool = False) -> moderngl.Program:
+    def program(
+        self, kind: str, shape: str, sprite: bool, aa: bool = False, clips: bool = False
+    ) -> moderngl.Program:
         """The splat program of a pass (geometry, visibility, accumulate, floor);
-        ``aa``: the coverage-aware variant of visibility and accumulate."""
+        ``aa``: the coverage-aware variant of visibility and accumulate;
+        ``clips`` (with ``aa``): for a cut upload, each point's clip planes
+        read from its table (:attr:`~aniso3d.rendering.splat.buffers.GPUPoints.cut`)."""
         defines: dict[str, object] = {"ROUND": int(shape != "square")}
         if kind == "floor":
             return self.gl.program("splat.vert", "splat_floor.frag", defines=defines)
@@ -123,6 +127,8 @@ class SplatPipeline:
                 LAST_WEIGHTS=int(params.AA_LAST_WEIGHTS), SURFACE_REACH=float(params.AA_SURFACE_REACH),
                 SHEET_REACH=int(params.AA_SHEET_REACH), SHEET_GRAZE=float(params.AA_SHEET_GRAZE),
             )
+            if clips:
+                defines.update(CLIPS=1, CLIP_TABLE_PER_ROW=CLIP_TABLE_PER_ROW)
         if sprite:
             return self.gl.program("splat.vert", "splat.frag", defines=defines)
         defines["GEOMETRY_PATH"] = 1
@@ -151,18 +157,14 @@ class SplatPipeline:
         if vao is None:
             if "in_position" not in prog:
                 raise ResourceError("splat vertex shader has no active in_position attribute")
-            content = []
-            for buffer, attributes in ((handle.vbo, ATTRIBUTES), (handle.clip_vbo, CLIP_ATTRIBUTES)):
-                if buffer is None or not any(name in prog for name, _ in attributes):
-                    continue  # no clip planes: the shader reads the default (0, 0, 0), none
-                fmt, names = [], []
-                for name, k in attributes:
-                    if name in prog:  # attributes a variant does not read are skipped
-                        fmt.append(f"{k}f")
-                        names.append(name)
-                    else:
-                        fmt.append(f"{4 * k}x")
-                content.append((buffer, " ".join(fmt), *names))
+            fmt, names = [], []
+            for name, k in ATTRIBUTES:
+                if name in prog:  # attributes a variant does not read are skipped
+                    fmt.append(f"{k}f")
+                    names.append(name)
+                else:
+                    fmt.append(f"{4 * k}x")
+            content = [(handle.vbo, " ".join(fmt), *names)]
             if indexed:
                 vao = self.gl.ctx.vertex_array(
                     prog, content, index_buffer=handle.index_buffer, index_element_size=4
@@ -251,10 +253,11 @@ class SplatPipeline:
         self, handle: GPUPoints, view: FrameView, opts: SplatOptions, kind: str, uniforms: dict
     ) -> None:
         """One pass over the points: sprites, then the wide splats' quads. A
-        pyramid upload draws this frame's selection (``handle.drawn``)."""
-        indexed = isinstance(handle, GPULodPoints)
-        if indexed and not len(handle.drawn):
-            return
+        pyramid upload draws this frame's selection (``handle.drawn``).
+        Quality "high" draws the points with clip planes apart, from their own
+        upload (:attr:`~aniso3d.rendering.splat.buffers.GPUPoints.cut`), with
+        the program that reads and cuts by them; the others' program has no
+        clipping code (llvmpipe runs it for every point it is in)."""
         aa = opts.quality == "high"
         limit = self.max_sprite
         if aa and kind == "accumulate":
@@ -263,7 +266,21 @@ class SplatPipeline:
             # code in a shader even where no pixel runs it), so those go there.
             limit = min(limit, AA_SHADE_BOX)
         uniforms = {**uniforms, "u_max_sprite": limit, "u_shade_box": AA_SHADE_BOX}
-        prog = self.program(kind, opts.splat, sprite=True, aa=aa)
+        self._draw(handle, view, opts, kind, uniforms, limit, aa, clips=False)
+        if aa and handle.cut is not None:
+            handle.cut.clip_table.use(location=CLIP_TABLE_UNIT)
+            self._draw(handle.cut, view, opts, kind, {**uniforms, "u_clip_table": CLIP_TABLE_UNIT}, limit, aa,
+                       clips=True)  # fmt: skip
+
+    def _draw(
+        self, handle: GPUPoints, view: FrameView, opts: SplatOptions, kind: str, uniforms: dict, limit: float,
+        aa: bool, clips: bool,
+    ) -> None:  # fmt: skip
+        """:meth:`splats` of one upload, sprites up to ``limit`` pixels."""
+        indexed = isinstance(handle, GPULodPoints)
+        if indexed and not len(handle.drawn):
+            return
+        prog = self.program(kind, opts.splat, sprite=True, aa=aa, clips=clips)
         self.bind(prog, uniforms)
         if indexed:
             self.vao(handle, prog, True).render(moderngl.POINTS, vertices=len(handle.drawn))
@@ -276,7 +293,7 @@ class SplatPipeline:
             hi = np.searchsorted(handle.drawn, [f + c for f, c in ranges])
             ranges = [(int(a), int(b - a)) for a, b in zip(lo, hi, strict=True) if b > a]
         if ranges:
-            prog = self.program(kind, opts.splat, sprite=False, aa=aa)
+            prog = self.program(kind, opts.splat, sprite=False, aa=aa, clips=clips)
             self.bind(prog, uniforms)
             vao = self.vao(handle, prog, indexed)
             for first, count in ranges:
