@@ -55,3 +55,20 @@ def build_open(mesh, *args, **kwargs):
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(mesh_stream, "face_topology", lambda v, f: (np.zeros(len(f), np.int8), np.zeros(len(f), bool)))
         return build_texture(mesh, *args, **kwargs)
+
+
+def module_renderer(size, backend: str = "egl"):
+    """A module-scoped fixture ``r``: one headless Renderer of ``size`` on
+    ``backend``, released at the module's end; the module is skipped where
+    that OpenGL context cannot be made. In a module: ``r = module_renderer(SIZE)``."""
+
+    @pytest.fixture(scope="module")
+    def r():
+        try:
+            renderer = Renderer(size, backend=backend)
+        except ResourceError as exc:  # no OpenGL through this backend on this machine
+            pytest.skip(str(exc))
+        yield renderer
+        renderer.release()
+
+    return r

@@ -13,8 +13,9 @@ import math
 
 import numpy as np
 import pytest
+from conftest import module_renderer
 
-from aniso3d import AnisoTexture, PointCloud, ResourceError, build_texture, scenes
+from aniso3d import AnisoTexture, PointCloud, build_texture, scenes
 from aniso3d.bench.corpus import corpus_cameras
 from aniso3d.rendering.camera import Camera
 from aniso3d.rendering.frame import FrameView
@@ -25,14 +26,7 @@ from aniso3d.rendering.splat.reference import composite_np, subpixel_fragments_n
 SIZE = (64, 64)
 
 
-@pytest.fixture(scope="module")
-def r():
-    try:
-        renderer = Renderer(SIZE, backend="egl")
-    except ResourceError as exc:  # no OpenGL through EGL on this machine
-        pytest.skip(str(exc))
-    yield renderer
-    renderer.release()
+r = module_renderer(SIZE)
 
 
 def two_sided(p: PointCloud) -> PointCloud:

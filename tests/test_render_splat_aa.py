@@ -15,26 +15,19 @@ import math
 
 import numpy as np
 import pytest
+from conftest import module_renderer
 
 import aniso3d
-from aniso3d import PointCloud, ResourceError
+from aniso3d import PointCloud
 from aniso3d.rendering.camera import Camera
 from aniso3d.rendering.frame import FrameView
 from aniso3d.rendering.lighting import shade_np
-from aniso3d.rendering.renderer import Renderer
 from aniso3d.rendering.splat import SHAPES, SplatRenderer
 
 SIZE = (128, 128)
 
 
-@pytest.fixture(scope="module")
-def r():
-    try:
-        renderer = Renderer(SIZE, backend="egl")
-    except ResourceError as exc:  # no OpenGL through EGL on this machine
-        pytest.skip(str(exc))
-    yield renderer
-    renderer.release()
+r = module_renderer(SIZE)
 
 
 def cloud(positions, normals, areas, kd=(0.6, 0.5, 0.4)) -> PointCloud:

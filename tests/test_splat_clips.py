@@ -14,15 +14,15 @@ import math
 
 import numpy as np
 import pytest
+from conftest import module_renderer
 
-from aniso3d import PointCloud, ResourceError
+from aniso3d import PointCloud
 from aniso3d.build.mesh import Mesh
 from aniso3d.build.pyramid import LodPoints, pyramid
 from aniso3d.build.texture import build_texture
 from aniso3d.rendering.camera import Camera
 from aniso3d.rendering.frame import FrameView
 from aniso3d.rendering.lighting import Lighting
-from aniso3d.rendering.renderer import Renderer
 from aniso3d.rendering.splat import SplatOptions
 from aniso3d.rendering.splat.clips import entry_clips, texture_points
 from aniso3d.rendering.splat.reference import clip_geometry_np, composite_np, rect_kept_np, subpixel_fragments_np
@@ -35,14 +35,7 @@ BOUNDS = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
 GREY = (0.5, 0.5, 0.5)
 
 
-@pytest.fixture(scope="module")
-def r():
-    try:
-        renderer = Renderer(SIZE, backend="egl")
-    except ResourceError as exc:  # no OpenGL through EGL on this machine
-        pytest.skip(str(exc))
-    yield renderer
-    renderer.release()
+r = module_renderer(SIZE)
 
 
 def quad(x0, x1, y0, y1, z) -> Mesh:

@@ -19,12 +19,12 @@ import math
 
 import numpy as np
 import pytest
+from conftest import module_renderer
 
-from aniso3d import PointCloud, ResourceError
+from aniso3d import PointCloud
 from aniso3d.rendering.camera import Camera
 from aniso3d.rendering.frame import FrameView
 from aniso3d.rendering.lighting import Lighting, shade_np
-from aniso3d.rendering.renderer import Renderer
 from aniso3d.rendering.splat import AA_CLOSE, AA_LAYERS, AA_SPAN_MIN, SplatOptions
 from aniso3d.rendering.splat.reference import Fragments, composite_np, subpixel_fragments_np
 
@@ -37,14 +37,7 @@ TOL = 2e-4
 WHITE = (1.0, 1.0, 1.0)
 
 
-@pytest.fixture(scope="module")
-def r():
-    try:
-        renderer = Renderer(SIZE, backend="egl")
-    except ResourceError as exc:  # no OpenGL through EGL on this machine
-        pytest.skip(str(exc))
-    yield renderer
-    renderer.release()
+r = module_renderer(SIZE)
 
 
 def camera() -> Camera:

@@ -13,15 +13,15 @@ import math
 
 import numpy as np
 import pytest
+from conftest import module_renderer
 from scipy import ndimage
 
-from aniso3d import PointCloud, ResourceError
+from aniso3d import PointCloud
 from aniso3d.build.mesh import Mesh
 from aniso3d.build.texture import build_texture
 from aniso3d.errors import InputError
 from aniso3d.rendering.camera import Camera
 from aniso3d.rendering.frame import FrameView
-from aniso3d.rendering.renderer import Renderer
 from aniso3d.rendering.splat import SplatOptions, params
 from aniso3d.rendering.splat.clips import texture_points
 from aniso3d.rendering.splat.reference import Fragments, composite_np, subpixel_fragments_np
@@ -32,14 +32,7 @@ RED, BLUE, GREY = (0.9, 0.1, 0.1), (0.1, 0.2, 0.9), (0.5, 0.5, 0.5)
 WHITE = (1.0, 1.0, 1.0)
 
 
-@pytest.fixture(scope="module")
-def r():
-    try:
-        renderer = Renderer(SIZE, backend="egl")
-    except ResourceError as exc:  # no OpenGL through EGL on this machine
-        pytest.skip(str(exc))
-    yield renderer
-    renderer.release()
+r = module_renderer(SIZE)
 
 
 def pixel(depth, coverage, rgb, reach, counts: float = 1.0, span: float = 2.0) -> tuple[np.ndarray, float]:
