@@ -150,7 +150,13 @@ out vec4 f_color;
 // The fraction of this pixel the splat covers (see the top); h as in main(),
 // hit: the pixel's ray meets the splat's plane in front, within near..far.
 float coverage(vec3 h, bool hit) {
+#ifdef CLIPS
     bool cut = fs_in.cut0.yz != vec2(0.0) || fs_in.cut1.yz != vec2(0.0);
+#else
+    // No point of this draw is cut (a cloud's cut points are drawn apart):
+    // compiled out, as llvmpipe runs a branch's code for every fragment.
+    const bool cut = false;
+#endif
     float small = 0.0;
     if (fs_in.regime < 1.0) {
         vec2 d = gl_FragCoord.xy - fs_in.cpx;
