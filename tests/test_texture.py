@@ -82,15 +82,14 @@ def square(axis, offset, lo, hi, flip=False, **material):
 
 
 @pytest.mark.parametrize("resolution", [12, 40])
-def test_density_conservation_on_the_tree(resolution, monkeypatch):
+def test_density_conservation_on_the_tree(resolution):
     # The registration's sums, with no face taken as closed: the branches
     # (tubes open at small ends) are closed skins whose backs a voxel hides
     # (tests/test_thin_solids.py measures that part).
-    import aniso3d.build.mesh_stream as mesh_stream
+    from conftest import build_open
 
-    monkeypatch.setattr(mesh_stream, "face_topology", lambda v, f: (np.zeros(len(f), np.int8), np.zeros(len(f), bool)))
     mesh = small_tree()
-    tex = build_texture(mesh, resolution, 32)
+    tex = build_open(mesh, resolution, 32)
     assert_density_conserved(tex, mesh)
     assert tex.total_area() == pytest.approx(mesh.area(), rel=1e-12)
     assert tex.meta["n_triangles"] == mesh.n_faces
