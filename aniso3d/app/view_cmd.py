@@ -8,6 +8,8 @@ and reach the user as one line and exit status 2.
 from __future__ import annotations
 
 import argparse
+import os
+import sys
 from pathlib import Path
 
 from aniso3d.app.common import (
@@ -109,6 +111,7 @@ def read_view_input(args):
 
 def cmd_view(args) -> int:
     from aniso3d.app.viewer import Settings, check_display, run_viewer
+    from aniso3d.app.viewer.worker import builds_running
     from aniso3d.build.scene import Scene
 
     check_view_arguments(args)  # a bad combination of arguments: say so first
@@ -126,6 +129,14 @@ def cmd_view(args) -> int:
         name = f"{thing.name} ({thing.n_instances:,} instances)"
     else:
         name = "tree" if args.input is None else Path(args.input).name
-    return run_viewer(
+    status = run_viewer(
         thing, name, size=args.size, settings=settings, screenshot_dir=args.screenshot_dir
     )
+    if builds_running():
+        # Quit mid-build: the window, its GPU objects and every file are
+        # closed; end the process here rather than finalise the interpreter
+        # under the build thread (see builds_running).
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(status)
+    return status

@@ -352,8 +352,10 @@ class Viewer:
         finally:
             builder = self.data.builder
             if builder.running:
-                # A daemon thread: the process exits without waiting for it.
-                self._write(f"quit while building {builder.label}: not waiting for it")
+                # Cancelled (it stops at its next progress report); a daemon
+                # thread, so nothing here waits for it.
+                builder.cancel()
+                self._write(f"quit while building {builder.label}: cancelled, not waiting for it")
             self.close()
         return 0
 

@@ -7,12 +7,45 @@ per frame and uploads a finished result on the next frame.
 
 from __future__ import annotations
 
+import atexit
 import threading
 import time
 from collections.abc import Callable
 
 #: A job: called with a ``progress(fraction, stage)`` callable, returns {data key: value}.
 Job = Callable[[Callable[..., None]], dict]
+
+
+#: The build thread's name; :func:`builds_running` looks for it.
+THREAD_NAME = "aniso3d-build"
+
+
+def builds_running() -> bool:
+    """A viewer build thread is still working in this process.
+
+    A process must not finalise the interpreter under one: CPython stops a
+    daemon thread that wants the GIL back during finalisation by unwinding
+    its stack, and an unwind through compiled library frames can abort the
+    whole process ("terminate called without an active exception", seen as
+    an exit status of -6 on quit mid-build). The CLI therefore ends its
+    process with :func:`os._exit` when this is true.
+    """
+    return any(t.name == THREAD_NAME and t.is_alive() for t in threading.enumerate())
+
+
+#: How long the exit of a program waits for a cancelled build to stop.
+STOP_SECONDS = 30.0
+
+
+@atexit.register
+def _stop_builds() -> None:
+    """At interpreter exit (a program that called :func:`run_viewer`), wait
+    for cancelled builds to reach their next progress report and stop, so
+    finalisation never meets one (see :func:`builds_running`)."""
+    for t in threading.enumerate():
+        if t.name == THREAD_NAME and t.is_alive():
+            t.join(STOP_SECONDS)
+
 
 
 class Cancelled(Exception):
@@ -63,7 +96,7 @@ class Builder:
         self.key, self.label, self.started, self._result = key, label, time.perf_counter(), None
         self.fraction = 0.0
         # A daemon: quitting mid-build must not wait for the build.
-        self._thread = threading.Thread(target=work, name="aniso3d-build", daemon=True)
+        self._thread = threading.Thread(target=work, name=THREAD_NAME, daemon=True)
         self._thread.start()
 
     @property
