@@ -494,18 +494,27 @@ void composite(int v, vec3 x_in, float t0, float chord) {
             uint halo_face = (sh.w >> 8u) & 7u;
             bool halo = halo_face != 7u;
             if (halo && !(u_opacity_mode == 3 && foot > 0.0)) continue;
+            // A crease sheet drawn as its half-plane carries no halo (its
+            // halos' bit CREASE_BIT).
+            if (halo && ((sh.w >> CREASE_BIT) & 1u) == 1u && pixels >= HALF_PIXELS) continue;
             vec2 fill_share = unpackHalf2x16(sh.y);
             // A half-plane (render/sheet_halfplanes.py): a surface sheet
             // with an edge inside the voxel, where the footprint is filtered
             // and the voxel spans HALF_PIXELS or more.
             // A strip (render/sheet_strips.py): a closed surface's partial
             // sheet between two lines (or one), drawn from STRIP_PIXELS on.
-            bool strip = (sh.w >> 31u) == 1u && (sh.w & 8u) != 0u;
+            // A crease sheet's half-plane (render/volume.py:SHEET_CREASE):
+            // a half-plane that is a surface sheet, its line in word 12.
+            bool crease_line = (sh.w >> 31u) == 1u && fill_share.y >= RUN_SHARE;
+            bool strip = (sh.w >> 31u) == 1u && (sh.w & 8u) != 0u && !crease_line;
             bool hp = (sh.w >> 31u) == 1u && u_opacity_mode == 3 && foot > 0.0
                       && pixels >= (strip ? STRIP_PIXELS : HALF_PIXELS);
             float share = hp ? 1.0 : 1.0 - (1.0 - fill_share.y) * (1.0 - zoom);
-            // (A surface sheet keeps its runs' near and far sides.)
-            float sv = fill_share.y >= RUN_SHARE ? 1.0 : vis;
+            // A surface sheet counts in runs, but a crease sheet drawn as its
+            // half-plane (render/volume.py:SHEET_CREASE). (A surface sheet
+            // keeps its runs' near and far sides.)
+            bool in_runs = fill_share.y >= RUN_SHARE && !hp;
+            float sv = in_runs ? 1.0 : vis;
             float fill = sv * (hp ? 1.0 : share * fill_share.x);
             vec2 area_slack = unpackHalf2x16(sh.z);
             float a_s = sv * share * area_slack.x;
@@ -526,7 +535,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                 float hi = -min(s_in, s_out) + slack;
                 bool hit = lo <= 0.0 && hi >= 0.0;
                 float th = clamp(nw != 0.0 ? -s_in / nw : 0.0, 0.0, chord);
-                if (foot > 0.0 && fill_share.y >= RUN_SHARE) {
+                if (foot > 0.0 && in_runs) {
                     // A surface sheet: to the run. The footprint's rays,
                     // offset along the normal by up to half its width there,
                     // cross inside the voxel where the offset is in [lo, hi].
@@ -599,7 +608,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                         // Shaded where the ray crosses the plane, by the
                         // sheet's linear model across it (sheet_slopes).
                         vec3 cr = c;
-                        if (!halo && u_normal_mode == 0 && u_shading_mode == 0) {
+                        if (!halo && !crease_line && u_normal_mode == 0 && u_shading_mode == 0) {
                             vec3 p = x_in + g_d * (nw != 0.0 ? -s_in / nw : 0.0);
                             cr = smooth_sheet(e, b.w, p, nh, len_n, uintBitsToFloat(sh.x), vec3(kd_rg, kd_b_ks.x),
                                               kd_b_ks.y, shininess);
@@ -618,7 +627,8 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                         vec3 p = x_in + g_d * (nw != 0.0 ? -s_in / nw : 0.0);
                         ws *= strip ? strip_cover(sh.w, uintBitsToFloat(ENT(4u * e + 3u).x), p, nh, nw,
                                                   uintBitsToFloat(sh.x), foot * STRIP_FOOT)
-                                    : halfplane_ramp(sh.w, p, nh, nw, uintBitsToFloat(sh.x), foot);
+                                    : halfplane_ramp(crease_line ? ENT(4u * e + 3u).x : sh.w, p, nh, nw,
+                                                     uintBitsToFloat(sh.x), foot);
                     }
                     t_cross += ws * th;
                 }

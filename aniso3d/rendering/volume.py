@@ -110,7 +110,7 @@ voxel DDA over the whole grid, float64); the tests hold the two together.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import ClassVar
 
 import moderngl
@@ -240,6 +240,21 @@ EDGE_MODES = ("filtered", "sampled")
 #: of the voxel (or its voxel's facets together do) and continues into the
 #: neighbours. Partial sheets (leaves, edges) keep the per-voxel count.
 RUN_SHARE = 0.999
+#: A surface sheet only with its voxel's other facets (their net area fills
+#: the section, :attr:`EntrySheets.share`, its own does not) is a **crease**
+#: sheet where one of the voxel's entries turns from the largest by more than
+#: this (|n . n'| below it, about 60 degrees): a box's or a CAD part's edge
+#: crossing the voxel, where each face covers only its side of the edge.
+#: Where it is a half-plane (sheet_halfplanes: its facets fill one side of a
+#: line, here the edge) and the voxel spans :data:`HALF_PIXELS` or more, it
+#: is drawn as that half-plane, not in a run: a run counts each face's sheet
+#: over the whole section, past the edge, and outlines a box's silhouette a
+#: voxel too wide (docs/coverage.md, "Creases inside voxels"). Smaller, it
+#: stays in the runs, as before.
+SHEET_CREASE = 0.5
+#: Entry word 11's bit marking a halo of a crease sheet's half-plane
+#: (volume.frag: not drawn where the half-plane is).
+CREASE_BIT = 27
 #: A run closes when the ray has gone this far (grid units) past its last
 #: voxel: a surface cut by voxel faces, or a silhouette's near and far sides,
 #: lie in voxels a cell's diagonal apart at most along the ray.
@@ -497,6 +512,9 @@ class EntrySheets:
             (h^2); the rest of the entry's area A is always cloud.
         fill: ``area / section``, the coverage of the section, in [0, 1]
             (to float16, as the GPU stores it).
+        crease: bool, a crease sheet (:data:`SHEET_CREASE`): a surface
+            sheet by its voxel's facets together, not by its own, in a voxel
+            whose entries meet at a crease.
         share: static share of ``area`` drawn as a sheet at every scale:
             :data:`SHEET_FILL` ramp of how well the entry, or its voxel's
             facets together (a bent surface whose facets fall on several
@@ -515,6 +533,19 @@ class EntrySheets:
     fill: np.ndarray
     share: np.ndarray
     slack: np.ndarray
+    crease: np.ndarray
+
+    @property
+    def surface(self) -> np.ndarray:
+        """(E,) bool: the surface sheets (:data:`RUN_SHARE`), crease sheets
+        included."""
+        return self.share >= RUN_SHARE
+
+    @property
+    def plain_surface(self) -> np.ndarray:
+        """(E,) bool: the surface sheets that are no crease sheet (a crease
+        sheet may also be a half-plane)."""
+        return (self.share >= RUN_SHARE) & ~self.crease
 
 
 def _sections(normal: np.ndarray, local: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -657,6 +688,11 @@ def entry_sheets(texture: AnisoTexture, voxels: np.ndarray | None = None) -> Ent
         sheet_area = np.where(section > 1e-9, np.minimum(area, section), 0.0)
         fill = np.where(section > 1e-9, sheet_area / section, 0.0)
     share = _ramp(np.maximum(own, together[owner]), SHEET_FILL)
+    # Crease sheets: a surface sheet only together, in a voxel where an
+    # entry turns from the largest by more than SHEET_CREASE.
+    turned_away = np.zeros(V, dtype=bool)
+    np.logical_or.at(turned_away, owner, np.abs(facing) < SHEET_CREASE)
+    crease = turned_away[owner] & (share >= RUN_SHARE) & (_ramp(own, SHEET_FILL) < RUN_SHARE)
     spread = np.clip(1.0 - np.linalg.norm(n, axis=1), 0.0, 1.0)
     slack = SHEET_EPS + SHEET_BEND * np.sqrt(spread) * np.clip(1.0 - spread / SHEET_BEND_MAX, 0.0, 1.0)
     quantised = texture.meta.get(QUANTISED)
@@ -673,7 +709,7 @@ def entry_sheets(texture: AnisoTexture, voxels: np.ndarray | None = None) -> Ent
     share = share.astype(np.float16).astype(np.float64)
     sheet_area = np.minimum(sheet_area, 6e4).astype(np.float16).astype(np.float64)
     slack = np.minimum(slack, 6e4).astype(np.float16).astype(np.float64)
-    return EntrySheets(nh, d, section, sheet_area, fill, share, slack)
+    return EntrySheets(nh, d, section, sheet_area, fill, share, slack, crease)
 
 
 @dataclass
@@ -841,8 +877,10 @@ def sheet_terms(
     else:
         strip = halfp = np.zeros(len(rows), bool)
     share = np.where(halfp, 1.0, share)
-    # Surface sheets (counted in runs) keep a closed surface's back (vis).
-    sv = np.where(sh.share[at] >= RUN_SHARE, 1.0, vis)
+    # Surface sheets (counted in runs) keep a closed surface's back (vis); a
+    # crease sheet drawn as its half-plane is none.
+    in_runs = (sh.share[at] >= RUN_SHARE) & ~halfp
+    sv = np.where(in_runs, 1.0, vis)
     nh, a_s, fill = sh.normal[at], sv * share * sh.area[at], sv * np.where(halfp, 1.0, share * sh.fill[at])
     nw = nh @ w
     projected = np.bincount(owner, a_s * np.abs(nw), minlength=V)
@@ -855,7 +893,7 @@ def sheet_terms(
         x, ch = x_in[owner], chords[owner]
         s_in = np.einsum("ek,ek->e", nh, x) - sh.offset[at]
         hit, band_all, t_hit, foot, lo, hi = _crossings(s_in, nw, ch, sh.slack[at], a_s, pixels, edges)
-        surface = (foot > 0.0) & (sh.share[at] >= RUN_SHARE) & (a_s > 0)
+        surface = (foot > 0.0) & in_runs & (a_s > 0)
         ramp = np.ones((len(rows), 2))
         if layout is not None and surface.any():
             e = np.flatnonzero(surface & (layout.edges.face[rows] >= 0).any(axis=1))
@@ -867,8 +905,9 @@ def sheet_terms(
         run_c = c
         if layout is not None and normal == "mean" and shading == "smooth" and surface.any():
             # The run's sheets shaded where the ray crosses their planes, by
-            # their linear models across them (sheet_slopes).
-            e = np.flatnonzero(surface)
+            # their linear models across them (sheet_slopes); a crease
+            # sheet's half-plane flat (its line takes the model's word).
+            e = np.flatnonzero(surface & ~(layout.halfplanes.mask[rows] & sh.crease[at]))
             with np.errstate(divide="ignore", invalid="ignore"):
                 p = x[e] + w[None, :] * np.where(nw[e] != 0.0, -s_in[e] / nw[e], 0.0)[:, None]
             there = smoothed(np.asarray(texture.entry_normal, np.float64)[rows[e]],
@@ -976,6 +1015,8 @@ def _with_halos(run, layout, halos, texture, w, lighting, normal, x_in, chords, 
     counted = np.where(hit, fill, fill * band_all) * ramp[:, 0]
     weight = np.where(hit, fill, fill * band_all) * ramp[:, 1]
     ok = (sh.share[src] >= RUN_SHARE) & (a_s > 0) & ((counted > 0.0) | (weight > 0.0))
+    # A crease sheet drawn as its half-plane carries no halo.
+    ok &= ~(layout.halfplanes.mask[src] & sh.crease[src] & (pixels[owner] >= HALF_PIXELS))
     halo_run = {"voxel": owner[ok], "normal": nh[ok], "nw": nw[ok], "band": (fill * band_all * ramp[:, 0])[ok],
                 "hit": np.where(hit, fill * ramp[:, 0], 0.0)[ok], "counted": counted[ok], "weight": weight[ok],
                 "color": c[ok], "t": t_hit[ok], "edge": np.zeros(int(ok.sum()), bool),
@@ -1005,17 +1046,23 @@ class SheetLayout:
     strips: SheetStrips
 
 
+def _no_creases(halfplanes: SheetHalfplanes, sheets: EntrySheets) -> SheetHalfplanes:
+    """``halfplanes`` less the crease sheets': those stay surface sheets
+    where drawn small, whose linear model a strip's far line would overwrite."""
+    return replace(halfplanes, mask=halfplanes.mask & ~sheets.crease)
+
+
 def sheet_layout(texture: AnisoTexture) -> SheetLayout:
     """The :class:`SheetLayout` of ``texture``."""
     sheets = entry_sheets(texture)
-    ed = sheet_edges(texture, sheets, sheets.share >= RUN_SHARE)
-    sl = sheet_slopes(texture, sheets, sheets.share >= RUN_SHARE)
+    ed = sheet_edges(texture, sheets, sheets.surface)
+    sl = sheet_slopes(texture, sheets, sheets.surface)
     half = lambda x: x.astype(np.float16).astype(np.float64)  # noqa: E731
     pshape = np.asarray(texture.shape, dtype=np.int64) + 2 * GRID_PAD
     keys = cell_keys(ed.halo_cell + GRID_PAD, pshape)
     order = np.argsort(keys, kind="stable")
-    hp = sheet_halfplanes(texture, sheets, sheets.share >= RUN_SHARE)
-    st = sheet_strips(texture, sheets, sheets.share >= RUN_SHARE, hp, closed_sign(texture))
+    hp = sheet_halfplanes(texture, sheets, sheets.plain_surface)
+    st = sheet_strips(texture, sheets, sheets.surface, _no_creases(hp, sheets), closed_sign(texture))
     return SheetLayout(sheets, ed, keys[order], order, SheetSlopes(half(sl.shape), half(sl.kd)), hp, st)
 
 
@@ -1393,21 +1440,29 @@ def pack_volume_grid(texture: AnisoTexture) -> PackedVolume:
     entries[:, 9] = fill_share.view(np.uint32).ravel()
     area_slack = np.stack([sheets.area, sheets.slack], axis=1).astype(np.float16)
     entries[:, 10] = area_slack.view(np.uint32).ravel()
-    edges = sheet_edges(texture, sheets, sheets.share >= RUN_SHARE)
+    edges = sheet_edges(texture, sheets, sheets.surface)
     entries[:, 11] = edge_words(edges.face, edges.kind, edges.angle)
     # A half-plane has no edges on faces: its words take the edges' angles' bits.
-    halfplanes = sheet_halfplanes(texture, sheets, sheets.share >= RUN_SHARE)
-    entries[:, 11] = np.where(halfplanes.mask, (entries[:, 11] & 0x7F7) | halfplane_words(halfplanes), entries[:, 11])
-    slopes = sheet_slopes(texture, sheets, sheets.share >= RUN_SHARE)
+    halfplanes = sheet_halfplanes(texture, sheets, sheets.plain_surface)
+    lines = halfplane_words(halfplanes)
+    plain_hp, crease_hp = halfplanes.mask & ~sheets.crease, halfplanes.mask & sheets.crease
+    entries[:, 11] = np.where(plain_hp, (entries[:, 11] & 0x7F7) | lines, entries[:, 11])
+    # A crease sheet's half-plane keeps its edges on faces (it is a surface
+    # sheet where drawn small): its flag (bit 31; a surface sheet's static
+    # share tells it from the others') in word 11, its line in word 12, which
+    # its linear model leaves (it is shaded flat where drawn in a run).
+    entries[:, 11] = np.where(crease_hp, entries[:, 11] | np.uint32(1 << 31), entries[:, 11])
+    slopes = sheet_slopes(texture, sheets, sheets.surface)
     # (S11, S12), (S22, dkd_r/du), (dkd_r/dv, dkd_g/du), (dkd_g/dv, dkd_b/du), (dkd_b/dv, sigma).
     sigma = closed_sign(texture)
     model = np.concatenate([slopes.shape, slopes.kd.transpose(0, 2, 1).reshape(E, 6), sigma[:, None]], axis=1)
     model = model.astype(np.float16).view(np.uint32)
     entries[:, 7] = model[:, 0]
     entries[:, 12:16] = model[:, 1:5]
+    entries[:, 12] = np.where(crease_hp, lines, entries[:, 12])
     # A strip is a half-plane with a far line: no surface sheet, so no
     # linear model in word 12, which takes the far line's offset.
-    strips = sheet_strips(texture, sheets, sheets.share >= RUN_SHARE, halfplanes, sigma)
+    strips = sheet_strips(texture, sheets, sheets.surface, _no_creases(halfplanes, sheets), sigma)
     near, far = strip_words(strips)
     entries[:, 11] = np.where(strips.mask, (entries[:, 11] & 0x7F7) | near, entries[:, 11])
     entries[:, 12] = np.where(strips.mask, far, entries[:, 12])
@@ -1432,7 +1487,7 @@ def pack_volume_grid(texture: AnisoTexture) -> PackedVolume:
     halo[:, 11] = edge_words(
         np.full((len(halo), MAX_EDGES), -1), np.stack([edges.halo_kind, none[:, 1]], 1),
         np.stack([edges.halo_angle, none[:, 1]], 1), edges.halo_face,
-    )
+    ) | np.where(crease_hp[edges.halo_row], np.uint32(1 << CREASE_BIT), np.uint32(0))
     voxel_of = np.concatenate([texture.entry_voxel, halo_vox])
     order = np.lexsort((np.arange(len(voxel_of)), np.arange(len(voxel_of)) >= E, voxel_of))
     entries = np.concatenate([entries, halo])[order]
@@ -1603,6 +1658,7 @@ class VolumeRenderer:
             "CLIP_MARGIN": CLIP_MARGIN,
             "HALF_C_RANGE": HALF_C_RANGE,
             "HALF_PIXELS": HALF_PIXELS,
+            "CREASE_BIT": f"{CREASE_BIT}u",
             "STRIP_PIXELS": STRIP_PIXELS,
             "STRIP_FOOT": STRIP_FOOT,
         }
