@@ -362,6 +362,26 @@ float strip_cover(uint w, float far, vec3 p, vec3 nh, float nw, float d, float f
     return clamp(near - line_ramp(edge_angle((w >> 11u) & 255u), far, p, nh, nw, d, foot), 0.0, 1.0);
 }
 
+// What a crease half-plane's line (entry word 12: bits 11-30 the line, bits
+// 0-7 its partner's angle phi about it) leaves of a run sheet's coverage (x)
+// and colour weight (y) where the ray crosses its plane at p: the share of
+// the footprint on its side for both where the crease is a silhouette, else
+// the coverage whole and the colour by that share. Mirrors
+// render/sheet_creases.py:crease_factors.
+vec2 crease_factors(uint w, vec3 p, vec3 nh, float nw, float d, float foot) {
+    float ramp = halfplane_ramp(w, p, nh, nw, d, foot);
+    vec3 t1 = normalize(cross(nh, abs(nh.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0)));
+    vec3 t2 = cross(nh, t1);
+    float theta = edge_angle((w >> 11u) & 255u);
+    vec3 u = cos(theta) * t1 + sin(theta) * t2;
+    vec3 nu = cross(g_d, cross(nh, u));
+    float al = dot(nu, u);
+    float be = dot(nu, nh);
+    float phi = edge_angle(w & 255u);
+    bool silhouette = al * (al * cos(phi) + be * sin(phi)) > 0.0;
+    return silhouette ? vec2(ramp) : vec2(1.0, ramp);
+}
+
 // The shaded colour of sheet e (unit normal nh, of length len_n stored:
 // its coherence; plane nh.x = d; reflectance kd) at the point p of its
 // plane, by its linear model across the plane (render/sheet_slopes.py: the
@@ -546,13 +566,19 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                     // open edges (a halo: past its edge), where the ray
                     // crosses its plane.
                     vec2 ramp = vec2(1.0);  // (coverage, colour weight)
-                    if (halo || (sh.w & 0x77u) != 0x77u) {
+                    bool faced = halo || (sh.w & 0x77u) != 0x77u;
+                    if (faced || crease_line) {
                         vec3 p = x_in + g_d * (nw != 0.0 ? -s_in / nw : 0.0);
-                        uint f0 = halo ? halo_face : sh.w & 7u;
-                        uint f1 = (sh.w >> 4u) & 7u;
-                        float sgn = halo ? -1.0 : 1.0;
-                        if (f0 != 7u) ramp *= edge_factors(f0, ((sh.w >> 3u) & 1u) == 1u, edge_angle((sh.w >> 11u) & 255u), p, nh, nw, foot, sgn);
-                        if (f1 != 7u) ramp *= edge_factors(f1, ((sh.w >> 7u) & 1u) == 1u, edge_angle((sh.w >> 19u) & 255u), p, nh, nw, foot, sgn);
+                        if (faced) {
+                            uint f0 = halo ? halo_face : sh.w & 7u;
+                            uint f1 = (sh.w >> 4u) & 7u;
+                            float sgn = halo ? -1.0 : 1.0;
+                            if (f0 != 7u) ramp *= edge_factors(f0, ((sh.w >> 3u) & 1u) == 1u, edge_angle((sh.w >> 11u) & 255u), p, nh, nw, foot, sgn);
+                            if (f1 != 7u) ramp *= edge_factors(f1, ((sh.w >> 7u) & 1u) == 1u, edge_angle((sh.w >> 19u) & 255u), p, nh, nw, foot, sgn);
+                        }
+                        // A crease sheet in a run: its half-plane's line cuts
+                        // it as an edge (render/sheet_creases.py).
+                        if (crease_line) ramp *= crease_factors(ENT(4u * e + 3u).x, p, nh, nw, uintBitsToFloat(sh.x), foot);
                     }
                     float band_all = fill * crossing_fraction(lo + slack, hi - slack, half_w);
                     float band = band_all * ramp.x;

@@ -125,6 +125,7 @@ from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.frame import DrawStats, FrameView
 from aniso3d.rendering.lighting import Lighting, shade_np
 from aniso3d.rendering.select import volume_level
+from aniso3d.rendering.sheet_creases import crease_factors, crease_partners, partner_codes
 from aniso3d.rendering.sheet_edges import GRID_PAD, MAX_EDGES, SheetEdges, edge_factors, edge_words, sheet_edges
 from aniso3d.rendering.sheet_halfplanes import C_RANGE as HALF_C_RANGE
 from aniso3d.rendering.sheet_halfplanes import (
@@ -250,7 +251,8 @@ RUN_SHARE = 0.999
 #: is drawn as that half-plane, not in a run: a run counts each face's sheet
 #: over the whole section, past the edge, and outlines a box's silhouette a
 #: voxel too wide (docs/coverage.md, "Creases inside voxels"). Smaller, it
-#: stays in the runs, as before.
+#: stays in the runs, its line cutting it as an edge on a voxel face cuts a
+#: sheet (render/sheet_creases.py).
 SHEET_CREASE = 0.5
 #: Entry word 11's bit marking a halo of a crease sheet's half-plane
 #: (volume.frag: not drawn where the half-plane is).
@@ -899,6 +901,16 @@ def sheet_terms(
             e = np.flatnonzero(surface & (layout.edges.face[rows] >= 0).any(axis=1))
             if len(e):
                 ramp[e] = _edge_ramps(layout.edges, rows[e], None, x[e], nh[e], s_in[e], nw[e], w, foot[e])
+            # A crease sheet in a run: its half-plane's line cuts it as an edge (sheet_creases).
+            e = np.flatnonzero(surface & layout.halfplanes.mask[rows] & sh.crease[at])
+            if len(e):
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    p = x[e] + w[None, :] * np.where(nw[e] != 0.0, -s_in[e] / nw[e], 0.0)[:, None]
+                re = rows[e]
+                cov, col = crease_factors(layout.halfplanes.angle[re], layout.halfplanes.offset[re],
+                                          layout.crease_phi[re], sh.offset[at][e], p, nh[e], w, foot[e])  # fmt: skip
+                ramp[e, 0] *= cov
+                ramp[e, 1] *= col
         band = np.where(surface, fill * band_all * ramp[:, 0], 0.0)
         counted = np.where(surface, np.where(hit, fill * ramp[:, 0], band), 0.0)
         weight = np.where(surface, np.where(hit, fill, fill * band_all) * ramp[:, 1], 0.0)
@@ -1044,12 +1056,22 @@ class SheetLayout:
     slopes: SheetSlopes
     halfplanes: SheetHalfplanes
     strips: SheetStrips
+    #: (E,) a crease half-plane's partner angle (sheet_creases.crease_partners), else 0.
+    crease_phi: np.ndarray
 
 
 def _no_creases(halfplanes: SheetHalfplanes, sheets: EntrySheets) -> SheetHalfplanes:
     """``halfplanes`` less the crease sheets': those stay surface sheets
     where drawn small, whose linear model a strip's far line would overwrite."""
     return replace(halfplanes, mask=halfplanes.mask & ~sheets.crease)
+
+
+def _crease_phi(texture: AnisoTexture, sheets: EntrySheets, halfplanes: SheetHalfplanes) -> np.ndarray:
+    """(E,) each crease half-plane's partner angle (:func:`crease_partners`), 0 elsewhere."""
+    phi = np.zeros(texture.n_entries)
+    rows = np.flatnonzero(halfplanes.mask & sheets.crease)
+    phi[rows] = crease_partners(texture, sheets, halfplanes, rows)
+    return phi
 
 
 def sheet_layout(texture: AnisoTexture) -> SheetLayout:
@@ -1063,7 +1085,8 @@ def sheet_layout(texture: AnisoTexture) -> SheetLayout:
     order = np.argsort(keys, kind="stable")
     hp = sheet_halfplanes(texture, sheets, sheets.plain_surface)
     st = sheet_strips(texture, sheets, sheets.surface, _no_creases(hp, sheets), closed_sign(texture))
-    return SheetLayout(sheets, ed, keys[order], order, SheetSlopes(half(sl.shape), half(sl.kd)), hp, st)
+    return SheetLayout(sheets, ed, keys[order], order, SheetSlopes(half(sl.shape), half(sl.kd)), hp, st,
+                       _crease_phi(texture, sheets, hp))  # fmt: skip
 
 
 # ------------------------------------------------------------ the NumPy ray
@@ -1459,7 +1482,8 @@ def pack_volume_grid(texture: AnisoTexture) -> PackedVolume:
     model = model.astype(np.float16).view(np.uint32)
     entries[:, 7] = model[:, 0]
     entries[:, 12:16] = model[:, 1:5]
-    entries[:, 12] = np.where(crease_hp, lines, entries[:, 12])
+    partners = partner_codes(_crease_phi(texture, sheets, halfplanes))
+    entries[:, 12] = np.where(crease_hp, lines | partners, entries[:, 12])
     # A strip is a half-plane with a far line: no surface sheet, so no
     # linear model in word 12, which takes the far line's offset.
     strips = sheet_strips(texture, sheets, sheets.surface, _no_creases(halfplanes, sheets), sigma)
