@@ -125,7 +125,13 @@ from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.frame import DrawStats, FrameView
 from aniso3d.rendering.lighting import Lighting, shade_np
 from aniso3d.rendering.select import volume_level
-from aniso3d.rendering.sheet_creases import crease_factors, crease_partners, partner_codes
+from aniso3d.rendering.sheet_creases import (
+    CREASE_GAP,
+    CREASE_TILT,
+    crease_factors,
+    crease_partners,
+    partner_codes,
+)
 from aniso3d.rendering.sheet_edges import GRID_PAD, MAX_EDGES, SheetEdges, edge_factors, edge_words, sheet_edges
 from aniso3d.rendering.sheet_halfplanes import C_RANGE as HALF_C_RANGE
 from aniso3d.rendering.sheet_halfplanes import (
@@ -1066,12 +1072,20 @@ def _no_creases(halfplanes: SheetHalfplanes, sheets: EntrySheets) -> SheetHalfpl
     return replace(halfplanes, mask=halfplanes.mask & ~sheets.crease)
 
 
-def _crease_phi(texture: AnisoTexture, sheets: EntrySheets, halfplanes: SheetHalfplanes) -> np.ndarray:
-    """(E,) each crease half-plane's partner angle (:func:`crease_partners`), 0 elsewhere."""
-    phi = np.zeros(texture.n_entries)
-    rows = np.flatnonzero(halfplanes.mask & sheets.crease)
-    phi[rows] = crease_partners(texture, sheets, halfplanes, rows)
-    return phi
+def _sheet_halfplanes(texture: AnisoTexture, sheets: EntrySheets) -> tuple[SheetHalfplanes, np.ndarray]:
+    """The half-planes of ``texture``'s partial and crease sheets, a crease
+    sheet's kept only where its line lies on its partner's plane (an edge:
+    :func:`~aniso3d.rendering.sheet_creases.crease_partners`), and (E,) each
+    kept crease half-plane's partner angle, 0 elsewhere."""
+    hp = sheet_halfplanes(texture, sheets, sheets.plain_surface)
+    rows = np.flatnonzero(hp.mask & sheets.crease)
+    phi, tilt, gap = crease_partners(texture, sheets, hp, rows, with_fit=True)
+    edge = (tilt <= CREASE_TILT) & (gap <= CREASE_GAP)
+    mask = hp.mask.copy()
+    mask[rows[~edge]] = False
+    angles = np.zeros(texture.n_entries)
+    angles[rows[edge]] = phi[edge]
+    return replace(hp, mask=mask), angles
 
 
 def sheet_layout(texture: AnisoTexture) -> SheetLayout:
@@ -1083,10 +1097,9 @@ def sheet_layout(texture: AnisoTexture) -> SheetLayout:
     pshape = np.asarray(texture.shape, dtype=np.int64) + 2 * GRID_PAD
     keys = cell_keys(ed.halo_cell + GRID_PAD, pshape)
     order = np.argsort(keys, kind="stable")
-    hp = sheet_halfplanes(texture, sheets, sheets.plain_surface)
+    hp, phi = _sheet_halfplanes(texture, sheets)
     st = sheet_strips(texture, sheets, sheets.surface, _no_creases(hp, sheets), closed_sign(texture))
-    return SheetLayout(sheets, ed, keys[order], order, SheetSlopes(half(sl.shape), half(sl.kd)), hp, st,
-                       _crease_phi(texture, sheets, hp))  # fmt: skip
+    return SheetLayout(sheets, ed, keys[order], order, SheetSlopes(half(sl.shape), half(sl.kd)), hp, st, phi)
 
 
 # ------------------------------------------------------------ the NumPy ray
@@ -1466,7 +1479,7 @@ def pack_volume_grid(texture: AnisoTexture) -> PackedVolume:
     edges = sheet_edges(texture, sheets, sheets.surface)
     entries[:, 11] = edge_words(edges.face, edges.kind, edges.angle)
     # A half-plane has no edges on faces: its words take the edges' angles' bits.
-    halfplanes = sheet_halfplanes(texture, sheets, sheets.plain_surface)
+    halfplanes, phi = _sheet_halfplanes(texture, sheets)
     lines = halfplane_words(halfplanes)
     plain_hp, crease_hp = halfplanes.mask & ~sheets.crease, halfplanes.mask & sheets.crease
     entries[:, 11] = np.where(plain_hp, (entries[:, 11] & 0x7F7) | lines, entries[:, 11])
@@ -1482,8 +1495,7 @@ def pack_volume_grid(texture: AnisoTexture) -> PackedVolume:
     model = model.astype(np.float16).view(np.uint32)
     entries[:, 7] = model[:, 0]
     entries[:, 12:16] = model[:, 1:5]
-    partners = partner_codes(_crease_phi(texture, sheets, halfplanes))
-    entries[:, 12] = np.where(crease_hp, lines | partners, entries[:, 12])
+    entries[:, 12] = np.where(crease_hp, lines | partner_codes(phi), entries[:, 12])
     # A strip is a half-plane with a far line: no surface sheet, so no
     # linear model in word 12, which takes the far line's offset.
     strips = sheet_strips(texture, sheets, sheets.surface, _no_creases(halfplanes, sheets), sigma)
