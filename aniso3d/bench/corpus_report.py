@@ -18,7 +18,8 @@ from aniso3d.files import atomic_write
 #: Short headers of the targets' columns.
 TARGET_HEADERS = {
     "minified_vs_2x2": "minified >= 2x2",
-    "volume_faster": "volume faster than 1 spp",
+    "volume_faster": "volume faster than 1 spp (minified)",
+    "volume_2x": "volume within 2x 1 spp",
     "never_worse_1spp": "never worse than 1 spp",
     "never_worse_1spp_auto": "never worse than 1 spp (auto)",
     "less_flicker": "less flicker than 1 spp",
