@@ -483,7 +483,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
     vec3 view = -g_d;
     // planar: the backs of closed surfaces (render/volume.py:back_terms).
     float hide = u_opacity_mode == 3 ? u_back_hide : 0.0;
-    float v_dot_w = 0.0;       // V . w: the closed facets' outward vector area along the ray
+    float v_dot_w = 0.0;       // V . w: the hidden share of the closed facets' outward vector area along the ray
     for (uint e = e0; e < e1; ++e) {
         uvec4 a = ENT(4u * e);
         uvec4 b = ENT(4u * e + 1u);
@@ -497,9 +497,14 @@ void composite(int v, vec3 x_in, float t0, float chord) {
         // Its closed part faces away from the eye (a solid's back): hidden
         // but for a share 1 - u_back_hide (the front is drawn spread).
         float closed = unpackHalf2x16(ENT(4u * e + 3u).w).y;
+        // A thick solid's back (render/volume.py:thick_backs, stored moved
+        // out by THICK_CODE) is hidden whole at the default share.
+        bool thick = abs(closed) >= 0.75 * THICK_CODE;
+        closed = thick ? sign(closed) * (abs(closed) - THICK_CODE) : closed;
+        float hidden = thick ? min(1.0, hide * (1.0 / BACK_HIDE)) : hide;
         float nwo = closed * dot(n, g_d);
-        v_dot_w += area * nwo;
-        float vis = nwo > 0.0 ? 1.0 - hide * min(abs(closed), 1.0) : 1.0;
+        v_dot_w += hidden * area * nwo;
+        float vis = nwo > 0.0 ? 1.0 - hidden * min(abs(closed), 1.0) : 1.0;
         vec3 ns = u_normal_mode == 0 ? n : DIR(b.z >> 16u).xyz;
         float wgt = vis * area * abs(dot(ns, g_d));
         // The mean normal's length is its facets' coherence (lighting.glsl).
@@ -678,7 +683,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
         density = dot(g_nbw, dn);
     }
     // What the backs add to the density along the ray: max(0, V . w).
-    density = max(density - hide * max(v_dot_w, 0.0), 0.0);
+    density = max(density - max(v_dot_w, 0.0), 0.0);
     vec3 color = sum_w > 1e-7 * sum_a ? col_w / sum_w : (sum_a > 0.0 ? col_a / sum_a : vec3(0.0));
     // Per unit length (grid units) both laws have optical depth sigma, and
     // the mean chord 1/P gives coverage min(1, D/P).

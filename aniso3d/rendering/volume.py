@@ -305,6 +305,20 @@ RUN_GRAZE = 0.03
 #: (:data:`RUN_SHARE`) keep both sides: a silhouette's far side is part of
 #: its filter, and a tangent's planes may be crossed on the far side only.
 BACK_HIDE = 0.75
+#: ... but where a closed entry's solid is thick, its back is hidden whole
+#: (the share scaled by 1 / BACK_HIDE, at most 1): no closed surface facing
+#: the other way in its voxel or the voxels 1 to THICK_STEPS steps into the
+#: solid along its inward normal (a closed vector area of at least
+#: THICK_OPPOSITE voxel^2 against it). A beam a voxel or two wide keeps
+#: BACK_HIDE; a CAD part's or a building's back, many voxels behind its
+#: front, let a quarter of itself through at the outline, which drew
+#: outlines too wide (a turned cube's outline alpha 0.11 over the
+#: polygons', docs/coverage.md "Thick backs"; :func:`thick_backs`).
+THICK_STEPS = 3
+THICK_OPPOSITE = 0.03
+#: A thick entry's sigma is stored moved out by this (float16 word 15: its
+#: magnitude is at most 2 otherwise), volume.frag moves it back.
+THICK_CODE = 4.0
 #: uint32 words per shading entry on the GPU (four uvec4; see volume.frag).
 ENTRY_WORDS = 16
 #: Width in texels of the 2D textures the arrays of :func:`pack_volume` are
@@ -607,22 +621,73 @@ def closed_sign(texture: AnisoTexture, rows: np.ndarray | slice = slice(None)) -
     return np.clip(sig, -2.0, 2.0).astype(np.float16).astype(np.float64)
 
 
+def thick_backs(texture: AnisoTexture) -> np.ndarray:
+    """(E,) bool: the closed entries whose solid is thick behind them (see
+    :data:`THICK_STEPS`): no closed vector area of :data:`THICK_OPPOSITE`
+    or more facing against their outward normal in their voxel (their own
+    left out) nor in the voxels 1 to ``THICK_STEPS`` steps along their
+    inward normal. Vectorised (one look-up per step)."""
+    E = texture.n_entries
+    sigma = closed_sign(texture)
+    rows = np.flatnonzero(sigma != 0.0)
+    out = np.zeros(E, dtype=bool)
+    if len(rows) == 0:
+        return out
+    owner = np.asarray(texture.entry_voxel, dtype=np.int64)
+    n = np.asarray(texture.entry_normal, np.float64)
+    vec = (covered_area(texture) * sigma)[:, None] * n  # each entry's closed outward vector area
+    V = np.stack([np.bincount(owner, vec[:, i], minlength=texture.n_voxels) for i in range(3)], axis=1)
+    out_n = np.sign(sigma[rows])[:, None] * n[rows]
+    out_n /= np.maximum(np.linalg.norm(out_n, axis=1, keepdims=True), 1e-12)
+    coords = np.asarray(texture.coords, dtype=np.int64)
+    shape = np.asarray(texture.shape, dtype=np.int64)
+    keys = cell_keys(coords, shape)
+    order = np.argsort(keys, kind="stable")
+    thin = np.einsum("ek,ek->e", V[owner[rows]] - vec[rows], out_n) <= -THICK_OPPOSITE
+    for k in np.arange(1, 2 * THICK_STEPS + 1) / 2:
+        cell = coords[owner[rows]] + np.rint(-k * out_n).astype(np.int64)
+        inside = np.all((cell >= 0) & (cell < shape), axis=1)
+        key = np.where(inside, cell_keys(np.where(inside[:, None], cell, 0), shape), -1)
+        pos = np.minimum(np.searchsorted(keys[order], key), len(keys) - 1)
+        found = inside & (keys[order][pos] == key)
+        at = order[pos[found]]
+        thin[found] |= np.einsum("ek,ek->e", V[at], out_n[found]) <= -THICK_OPPOSITE
+    out[rows] = ~thin
+    return out
+
+
+def stored_sign(sigma: np.ndarray, thick: np.ndarray) -> np.ndarray:
+    """(E,) ``sigma`` as entry word 15 stores it (float16): a thick entry's
+    moved out by :data:`THICK_CODE`."""
+    moved = np.where(thick, np.sign(sigma) * (np.abs(sigma) + THICK_CODE), sigma)
+    return moved.astype(np.float16).astype(np.float64)
+
+
 def back_terms(
-    texture: AnisoTexture, rows: np.ndarray, owner: np.ndarray, n_voxels: int, w: np.ndarray, hide: float
-) -> tuple[np.ndarray, np.ndarray]:
+    texture: AnisoTexture, rows: np.ndarray, owner: np.ndarray, n_voxels: int, w: np.ndarray, hide: float,
+    thick: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """What the "planar" law keeps of the entries ``rows`` (of voxels
     ``owner``, in ``0..n_voxels``) seen along the unit ``w`` (:data:`BACK_HIDE`):
-    (E,) ``vis``, 1 less ``hide`` times the closed share ``min(|sigma|, 1)``
+    (E,) ``vis``, 1 less the entry's share hidden (``hide``; a thick
+    entry's, ``thick`` (E,) of the whole texture (:func:`thick_backs`),
+    ``min(1, hide / BACK_HIDE)``) times the closed share ``min(|sigma|, 1)``
     where the closed part faces away from the eye (``sigma n . w > 0``),
-    else 1; and (V,) what to take from each voxel's density, ``hide max(0,
-    V . w)`` with ``V . w = sum A_cov sigma n . w``. Mirrors composite() in
-    volume.frag."""
+    else 1; and (V,) what to take from each voxel's density, ``max(0,
+    sum share A_cov sigma n . w)``. Mirrors composite() in volume.frag."""
     sigma = closed_sign(texture, rows)
+    if thick is not None:
+        # As the GPU reads it back (stored_sign).
+        t = thick[rows]
+        sigma = np.where(t, np.sign(sigma) * (np.abs(stored_sign(sigma, t)) - THICK_CODE), sigma)
+        share = np.where(t, min(1.0, hide / BACK_HIDE), hide)
+    else:
+        share = np.full(len(sigma), float(hide))
     n = np.asarray(texture.entry_normal, np.float32)[rows].astype(np.float64)
     nwo = sigma * (n @ w)
-    vis = np.where(nwo > 0.0, 1.0 - hide * np.minimum(np.abs(sigma), 1.0), 1.0)
-    v_dot_w = np.bincount(owner, covered_area(texture, rows) * nwo, minlength=n_voxels)
-    return vis, hide * np.maximum(v_dot_w, 0.0)
+    vis = np.where(nwo > 0.0, 1.0 - share * np.minimum(np.abs(sigma), 1.0), 1.0)
+    v_dot_w = np.bincount(owner, share * covered_area(texture, rows) * nwo, minlength=n_voxels)
+    return vis, np.maximum(v_dot_w, 0.0)
 
 
 def covered_area(texture: AnisoTexture, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
@@ -864,7 +929,8 @@ def sheet_terms(
         sh, at = sheets, rows
     c, n = _entry_colors(texture, w, lighting, normal, rows)
     area = covered_area(texture, rows)
-    vis, back = back_terms(texture, rows, owner, V, w, back_hide if opacity == "planar" else 0.0)
+    thick = layout.thick if layout is not None else thick_backs(texture)
+    vis, back = back_terms(texture, rows, owner, V, w, back_hide if opacity == "planar" else 0.0, thick)
     pixels_v = np.broadcast_to(np.asarray(voxel_pixels, dtype=np.float64), (V,))
     x_in = np.asarray(x_in, np.float64).reshape(V, 3)
     chords = np.asarray(chords, np.float64).reshape(V)
@@ -1064,6 +1130,8 @@ class SheetLayout:
     strips: SheetStrips
     #: (E,) a crease half-plane's partner angle (sheet_creases.crease_partners), else 0.
     crease_phi: np.ndarray
+    #: (E,) bool, the closed entries whose solid is thick behind them (:func:`thick_backs`).
+    thick: np.ndarray
 
 
 def _no_creases(halfplanes: SheetHalfplanes, sheets: EntrySheets) -> SheetHalfplanes:
@@ -1099,7 +1167,8 @@ def sheet_layout(texture: AnisoTexture) -> SheetLayout:
     order = np.argsort(keys, kind="stable")
     hp, phi = _sheet_halfplanes(texture, sheets)
     st = sheet_strips(texture, sheets, sheets.surface, _no_creases(hp, sheets), closed_sign(texture))
-    return SheetLayout(sheets, ed, keys[order], order, SheetSlopes(half(sl.shape), half(sl.kd)), hp, st, phi)
+    return SheetLayout(sheets, ed, keys[order], order, SheetSlopes(half(sl.shape), half(sl.kd)), hp, st, phi,
+                       thick_backs(texture))  # fmt: skip
 
 
 # ------------------------------------------------------------ the NumPy ray
@@ -1491,7 +1560,8 @@ def pack_volume_grid(texture: AnisoTexture) -> PackedVolume:
     slopes = sheet_slopes(texture, sheets, sheets.surface)
     # (S11, S12), (S22, dkd_r/du), (dkd_r/dv, dkd_g/du), (dkd_g/dv, dkd_b/du), (dkd_b/dv, sigma).
     sigma = closed_sign(texture)
-    model = np.concatenate([slopes.shape, slopes.kd.transpose(0, 2, 1).reshape(E, 6), sigma[:, None]], axis=1)
+    stored = stored_sign(sigma, thick_backs(texture))
+    model = np.concatenate([slopes.shape, slopes.kd.transpose(0, 2, 1).reshape(E, 6), stored[:, None]], axis=1)
     model = model.astype(np.float16).view(np.uint32)
     entries[:, 7] = model[:, 0]
     entries[:, 12:16] = model[:, 1:5]
@@ -1679,6 +1749,8 @@ class VolumeRenderer:
         self.max_block = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE", 1 << 27))
         defines = {
             "BRICK": BRICK,
+            "BACK_HIDE": BACK_HIDE,
+            "THICK_CODE": THICK_CODE,
             "ALPHA_MAX": float(np.float32(ALPHA_MAX)),
             "T_MIN": T_MIN,
             "T_MIN_PLAIN": T_MIN_PLAIN,
