@@ -1,8 +1,12 @@
-"""The volume renderer's crease sheets (render/volume.py ``SHEET_CREASE``):
-a box's or a CAD part's edge crossing a voxel, each face drawn as the
-half-plane on its side of the edge where the voxel spans ``HALF_PIXELS`` or
-more, against the rule off (``SHEET_CREASE`` 0: every such face a surface
-sheet in the runs, counted over its whole section, as before).
+"""The volume renderer's rules for closed solids' edges, each against
+itself off. ``--rule crease`` (default): crease sheets (render/volume.py
+``SHEET_CREASE``), a box's or a CAD part's edge crossing a voxel, each face
+cut at the edge (its half-plane where the voxel spans ``HALF_PIXELS`` or
+more, its line cutting it in the runs smaller); off, ``SHEET_CREASE`` 0:
+every such face a surface sheet in the runs, counted over its whole section.
+``--rule thick``: a thick solid's back hidden whole (``thick_backs``); off,
+``THICK_OPPOSITE`` -inf: every closed back kept at ``1 - BACK_HIDE``, as a
+thin solid's.
 
 Per scene (corpus names, or mesh files), at the corpus bench's two cameras
 (*close*: the object filling the image; *minified*: a voxel about a pixel),
@@ -15,7 +19,7 @@ rule off in the second (each uploads the texture once, with the rule as set
 then).
 
     .venv/bin/python demos/bench_volume_creases.py [SCENE | MESH FILE ...] [--size 512]
-        [--md docs/coverage.md]
+        [--rule crease|thick] [--md docs/coverage.md]
 """
 
 from __future__ import annotations
@@ -42,8 +46,9 @@ from aniso3d.build.texture import build_texture
 from aniso3d.rendering import volume
 from aniso3d.rendering.renderer import Renderer
 
-BEGIN = "<!-- bench_volume_creases: begin -->"
-END = "<!-- bench_volume_creases: end -->"
+#: Per rule: the module constant, its value off, the Markdown block's name.
+RULES = {"crease": ("SHEET_CREASE", 0.0, "bench_volume_creases"),
+         "thick": ("THICK_OPPOSITE", -float("inf"), "bench_volume_thick")}  # fmt: skip
 
 
 def edge_error(truth_a: np.ndarray, img_a: np.ndarray, crop) -> float:
@@ -58,16 +63,17 @@ def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
     mesh = load_mesh(name) if Path(name).suffix else scenes.get_scene(name)
     label = Path(name).name if Path(name).suffix else name
     tex = build_texture(mesh, args.resolution, args.directions)
-    rule = volume.SHEET_CREASE
+    name_, off, _ = RULES[args.rule]
+    rule = getattr(volume, name_)
     rows = []
     with Renderer((args.size, args.size)) as before:
         for spec, truth, row in scene_cameras(renderer, mesh, label, args):
             truth_a = renderer.render(mesh, spec.camera, "mesh", ssaa=args.gt_ssaa, alpha=True)[..., 3]
-            volume.SHEET_CREASE = 0.0
+            setattr(volume, name_, off)
             try:
                 old = before.render(tex, spec.camera, "volume", alpha=True)
             finally:
-                volume.SHEET_CREASE = rule
+                setattr(volume, name_, rule)
             new = renderer.render(tex, spec.camera, "volume", alpha=True)
             for key, img in (("off", old), ("on", new)):
                 row[key] = scored(truth, img[..., :3], spec)
@@ -78,21 +84,25 @@ def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
 
 
 def main() -> None:
-    args = corpus_parser(__doc__.splitlines()[0], scenes.CORPUS).parse_args()
+    ap = corpus_parser(__doc__.splitlines()[0], scenes.CORPUS)
+    ap.add_argument("--rule", choices=sorted(RULES), default="crease")
+    args = ap.parse_args()
+    name_, off, block = RULES[args.rule]
     run = run_corpus_demo(args, run_scene)
-    head = ["scene", "camera", "1 spp", "2x2", "volume, rule off", "volume, creases", "Δ PSNR", "Δ FLIP",
+    head = ["scene", "camera", "1 spp", "2x2", "volume, rule off", "volume, rule on", "Δ PSNR", "Δ FLIP",
             "edge err off", "edge err on"]  # fmt: skip
     table = [[r["scene"], r["camera"], pair(r["1 spp"]), pair(r["2x2"]), pair(r["off"]), pair(r["on"]),
               *delta(r["on"], r["off"]), f"{r['off edge']:.3f}", f"{r['on edge']:.3f}"] for r in run.rows]  # fmt: skip
     parts = [
-        f"{run.header(command('demos/bench_volume_creases.py', args))} Texture "
+        f"{run.header(command('demos/bench_volume_creases.py', args, '--rule', args.rule))} Texture "
         f"{args.resolution}^3, K = {args.directions}; truth {args.gt_ssaa}x{args.gt_ssaa} polygons; PSNR (dB) / "
-        f"FLIP inside the object's box, as the corpus bench. Rule: SHEET_CREASE {volume.SHEET_CREASE} "
-        f"(off: 0), half-planes from HALF_PIXELS {volume.HALF_PIXELS} px a voxel.",
+        f"FLIP inside the object's box, as the corpus bench. Rule: {name_} {getattr(volume, name_)} "
+        f"(off: {off}); SHEET_CREASE {volume.SHEET_CREASE}, HALF_PIXELS {volume.HALF_PIXELS}, BACK_HIDE "
+        f"{volume.BACK_HIDE}, THICK_STEPS {volume.THICK_STEPS}.",
         "",
         markdown_table(head, table),
     ]
-    publish(parts, args.md, BEGIN, END, "Volume coverage")
+    publish(parts, args.md, f"<!-- {block}: begin -->", f"<!-- {block}: end -->", "Volume coverage")
 
 
 if __name__ == "__main__":
