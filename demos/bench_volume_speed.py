@@ -201,7 +201,13 @@ def main() -> None:
             "|---|---|---|---|---|---|---|",
             *acc,
         ]
-    atomic_write(args.out, ("\n".join(head) + "\n").encode())
+    # What people wrote after the tables (from its first "## Findings" on) is kept.
+    kept = ""
+    if Path(args.out).exists():
+        old = Path(args.out).read_text()
+        at = old.find("\n## Findings")
+        kept = old[at:] if at >= 0 else ""
+    atomic_write(args.out, ("\n".join(head) + "\n" + kept).encode())
     print(f"wrote {args.out}")
 
 
