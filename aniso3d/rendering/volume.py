@@ -307,9 +307,9 @@ RUN_GRAZE = 0.03
 BACK_HIDE = 0.75
 #: ... but where a closed entry's solid is thick, its back is hidden whole
 #: (the share scaled by 1 / BACK_HIDE, at most 1): no closed surface facing
-#: the other way in its voxel or the voxels 1 to THICK_STEPS steps into the
-#: solid along its inward normal (a closed vector area of at least
-#: THICK_OPPOSITE voxel^2 against it). A beam a voxel or two wide keeps
+#: the other way in its voxel or the cells half a voxel to THICK_STEPS voxels
+#: into the solid along its inward normal, in half-voxel steps (a closed
+#: vector area of at least THICK_OPPOSITE voxel^2 against it). A beam a voxel or two wide keeps
 #: BACK_HIDE; a CAD part's or a building's back, many voxels behind its
 #: front, let a quarter of itself through at the outline, which drew
 #: outlines too wide (a turned cube's outline alpha 0.11 over the
@@ -625,8 +625,9 @@ def thick_backs(texture: AnisoTexture) -> np.ndarray:
     """(E,) bool: the closed entries whose solid is thick behind them (see
     :data:`THICK_STEPS`): no closed vector area of :data:`THICK_OPPOSITE`
     or more facing against their outward normal in their voxel (their own
-    left out) nor in the voxels 1 to ``THICK_STEPS`` steps along their
-    inward normal. Vectorised (one look-up per step)."""
+    left out) nor in the cells half a voxel to ``THICK_STEPS`` voxels along
+    their inward normal, in half-voxel steps. Vectorised (one look-up per
+    step)."""
     E = texture.n_entries
     sigma = closed_sign(texture)
     rows = np.flatnonzero(sigma != 0.0)
