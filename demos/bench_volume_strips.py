@@ -37,6 +37,7 @@ from aniso3d import metrics
 from aniso3d.bench.corpus import AUTO_CAMERA, corpus_cameras
 from aniso3d.bench.outputs import markdown_table, write_between_markers
 from aniso3d.bench.run import run_scenes
+from aniso3d.bench.variants import SUMMARY_HEAD, corpus_summary, ms
 from aniso3d.build import scenes
 from aniso3d.build.texture import build_texture
 from aniso3d.rendering import sheet_strips as ss
@@ -139,11 +140,6 @@ def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
     return rows
 
 
-def ms(times: list[float]) -> str:
-    t = 1000 * np.asarray(times)
-    return f"{np.median(t):.0f} [{t.min():.0f}-{t.max():.0f}]" if len(t) else "-"
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scenes", nargs="*", default=[*scenes.CORPUS])
@@ -171,17 +167,7 @@ def main() -> None:
                       f"{a['psnr']:.2f} / {a['flip']:.4f}", f"{b['psnr']:.2f} / {b['flip']:.4f}",
                       f"{b['psnr'] - a['psnr']:+.2f}", f"{b['flip'] - a['flip']:+.4f}",
                       f"{a['edge_err']:.3f}", f"{b['edge_err']:.3f}", ms(a["times"]), ms(b["times"])])  # fmt: skip
-    summary = []
-    for cam in ("close", "minified", AUTO_CAMERA):
-        sel = [r for r in rows if r["camera"] == cam]
-        if not sel:
-            continue
-        d = [r["on"]["psnr"] - r["off"]["psnr"] for r in sel]
-        df = [r["on"]["flip"] - r["off"]["flip"] for r in sel]
-        tr = [np.median(r["on"]["times"]) / np.median(r["off"]["times"]) for r in sel if r["on"]["times"]]
-        ratio = f"{np.median(tr):.2f} [{min(tr):.2f}-{max(tr):.2f}]" if tr else "-"
-        summary.append([cam, f"{np.mean(d):+.2f}", f"{min(d):+.2f}", f"{max(d):+.2f}", f"{np.mean(df):+.4f}",
-                        f"{max(df):+.4f}", ratio])  # fmt: skip
+    summary = corpus_summary(rows, "on", "off", ("close", "minified", AUTO_CAMERA))
     command = f"demos/bench_volume_strips.py {' '.join(args.scenes)} --size {args.size} --frames {args.frames}"
     if args.strip_pixels != ss.STRIP_PIXELS:
         command += f" --strip-pixels {args.strip_pixels:g}"
@@ -207,8 +193,7 @@ def main() -> None:
         "**Over the corpus** (on - off; PSNR dB: mean, worst, best; FLIP: mean, worst; frame time ratio "
         "on / off: median [range] over the scenes):",
         "",
-        markdown_table(["camera", "mean Δ PSNR", "worst", "best", "mean Δ FLIP", "worst Δ FLIP", "time ratio"],
-                       summary),  # fmt: skip
+        markdown_table(SUMMARY_HEAD, summary),
         END,
     ]
     block = "\n".join(parts)

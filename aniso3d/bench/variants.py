@@ -97,25 +97,27 @@ def as_good(score: Score, baseline: Score) -> str:
 
 
 def ms(times: list[float]) -> str:
-    """Frame times (s) as ``median [fastest-slowest]`` ms."""
+    """Frame times (s) as ``median [fastest-slowest]`` ms ("-": none timed)."""
     t = 1000 * np.asarray(times)
-    return f"{np.median(t):.0f} [{t.min():.0f}-{t.max():.0f}]"
+    return f"{np.median(t):.0f} [{t.min():.0f}-{t.max():.0f}]" if len(t) else "-"
 
 
-def corpus_summary(rows: list[dict], new: str, old: str) -> list[list[str]]:
-    """Per camera over the scenes, ``new`` against ``old`` (their dicts hold
-    ``psnr``, ``flip`` and frame ``times``): mean, worst and best change in
-    PSNR, mean and worst in FLIP, and the frame time ratio's median [range]."""
+def corpus_summary(rows: list[dict], new: str, old: str, cameras=("close", "minified")) -> list[list[str]]:
+    """Per camera of ``cameras`` over the scenes, ``new`` against ``old``
+    (their dicts hold ``psnr``, ``flip`` and frame ``times``): mean, worst
+    and best change in PSNR, mean and worst in FLIP, and the frame time
+    ratio's median [range] over the rows that were timed ("-": none)."""
     out = []
-    for cam in ("close", "minified"):
+    for cam in cameras:
         at = [r for r in rows if r["camera"] == cam]
         if not at:
             continue
         d = [r[new]["psnr"] - r[old]["psnr"] for r in at]
         df = [r[new]["flip"] - r[old]["flip"] for r in at]
-        tr = [np.median(r[new]["times"]) / np.median(r[old]["times"]) for r in at]
+        tr = [np.median(r[new]["times"]) / np.median(r[old]["times"]) for r in at if r[new]["times"]]
+        ratio = f"{np.median(tr):.2f} [{min(tr):.2f}-{max(tr):.2f}]" if tr else "-"
         out.append([cam, f"{np.mean(d):+.2f}", f"{min(d):+.2f}", f"{max(d):+.2f}", f"{np.mean(df):+.4f}",
-                    f"{max(df):+.4f}", f"{np.median(tr):.2f} [{min(tr):.2f}-{max(tr):.2f}]"])  # fmt: skip
+                    f"{max(df):+.4f}", ratio])  # fmt: skip
     return out
 
 
