@@ -265,6 +265,14 @@ class AnisoTexture:
     def _arrays(self) -> dict[str, np.ndarray]:
         return {n: getattr(self, n) for n in ARRAYS}
 
+    def local_centroids(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """(N, 3) float64: the centroids of the entries ``rows`` in their
+        voxels' local grid coordinates (the voxel is the unit cube), where
+        the renderers fit their sheets, edges and lines."""
+        h = float(self.voxel_size)
+        local = (np.asarray(self.entry_centroid, np.float64)[rows] - np.asarray(self.origin, np.float64)) / h
+        return local - np.asarray(self.coords, np.float64)[np.asarray(self.entry_voxel)[rows]]
+
     def total_area(self) -> float:
         """Registered facet area, world units squared (equals the mesh area)."""
         return float(np.sum(self.entry_area) * self.voxel_size**2)

@@ -21,9 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from aniso3d.grid import tangent_frame
 from aniso3d.rendering.sheet_edges import quantised_angle
-from aniso3d.rendering.sheet_halfplanes import SheetHalfplanes, angle_code, halfplane_ramp
+from aniso3d.rendering.sheet_halfplanes import SheetHalfplanes, angle_code, halfplane_ramp, line_inward, plane_origin
 
 #: A crease sheet's half-plane is an edge's when its line lies on its
 #: partner's plane: its direction tilted out of that plane by at most this
@@ -35,31 +34,24 @@ CREASE_TILT = 0.15
 CREASE_GAP = 0.1
 
 
-def line_inward(angle: np.ndarray, normal: np.ndarray) -> np.ndarray:
-    """(N, 3) the half-planes' inward unit direction u (into the covered
-    side) of ``angle`` (N,) in the tangent frame of the unit ``normal`` (N, 3)."""
-    t1, t2 = tangent_frame(normal)
-    th = np.asarray(angle, dtype=np.float64).reshape(-1)
-    return np.cos(th)[:, None] * t1 + np.sin(th)[:, None] * t2
-
-
-def crease_partners(texture, sheets, halfplanes: SheetHalfplanes, rows: np.ndarray,
-                    with_fit: bool = False):  # fmt: skip
-    """(len(rows),) the angle phi (radians, as the GPU reads it back) of
+def crease_partners(
+    texture, sheets, halfplanes: SheetHalfplanes, rows: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Three (len(rows),) arrays: the angle phi (radians, as the GPU reads it back) of
     each crease half-plane's partner about its line: the voxel's entry whose
     normal turns most from the sheet's, its facets' centroid taken to the
     plane through the line normal to it, ``v = cos(phi) u + sin(phi) n``
     (u the sheet's inward direction, n its normal), as
     :func:`~aniso3d.rendering.sheet_edges.sheet_edges` measures a crease's
-    partner on a voxel face. With ``with_fit``, also (len(rows),) how far the
-    line lies off the partner's plane: its direction's tilt out of it
-    (|n' . t|) and its distance from it (voxel units). Vectorised over the
-    (entry, other entry) pairs of the rows' voxels."""
+    partner on a voxel face; and how far the line lies off the partner's
+    plane: its direction's tilt out of it (|n' . t|) and its distance from
+    it (voxel units; both inf where the voxel holds no other entry).
+    Vectorised over the (entry, other entry) pairs of the rows' voxels."""
     rows = np.asarray(rows, dtype=np.int64)
     phi = np.zeros(len(rows))
     tilt, gap = np.full(len(rows), np.inf), np.full(len(rows), np.inf)
     if len(rows) == 0:
-        return (phi, tilt, gap) if with_fit else phi
+        return phi, tilt, gap
     owner = np.asarray(texture.entry_voxel, dtype=np.int64)
     counts = np.bincount(owner, minlength=texture.n_voxels)
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
@@ -73,21 +65,15 @@ def crease_partners(texture, sheets, halfplanes: SheetHalfplanes, rows: np.ndarr
     order = np.lexsort((turn, i))
     first = order[np.r_[True, i[order][1:] != i[order][:-1]]]
     i, j = i[first], j[first]
-    h = float(texture.voxel_size)
-    local = (np.asarray(texture.entry_centroid, np.float64) - np.asarray(texture.origin, np.float64)) / h
-    local = local - np.asarray(texture.coords, np.float64)[owner]
     r = rows[i]
     n = sheets.normal[r]
     u = line_inward(halfplanes.angle[r], n)
-    q0 = 0.5 - (n.sum(axis=1) * 0.5 - sheets.offset[r])[:, None] * n
     # A point of the line: q0 + c u (the line is (p - q0) . u = c).
-    on_line = q0 + halfplanes.offset[r][:, None] * u
+    on_line = plane_origin(n, sheets.offset[r]) + halfplanes.offset[r][:, None] * u
     t = np.cross(n, u)
-    v = local[j] - on_line
+    v = texture.local_centroids(j) - on_line
     v -= np.einsum("ek,ek->e", v, t)[:, None] * t
     phi[i] = np.arctan2(np.einsum("ek,ek->e", v, n), np.einsum("ek,ek->e", v, u))
-    if not with_fit:
-        return quantised_angle(phi)
     nj = sheets.normal[j]
     tilt[i] = np.abs(np.einsum("ek,ek->e", nj, t))
     gap[i] = np.abs(np.einsum("ek,ek->e", nj, on_line) - sheets.offset[j])

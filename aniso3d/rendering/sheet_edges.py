@@ -198,9 +198,7 @@ def sheet_edges(texture, sheets, surface: np.ndarray) -> SheetEdges:
     offsets = np.asarray(texture.entry_offsets, dtype=np.int64)
     has_plane = np.linalg.norm(nh, axis=1) > 0.5
     owner = np.asarray(texture.entry_voxel, dtype=np.int64)
-    h = float(texture.voxel_size)
-    centroid = (np.asarray(texture.entry_centroid, np.float64) - np.asarray(texture.origin, np.float64)) / h
-    centroid -= coords[owner]
+    centroid = texture.local_centroids()
     continued = np.zeros(len(pr), dtype=bool)
     met = np.zeros(len(pr), dtype=bool)
     # Sheets meeting an edge across: (pair, entry, its offset, distance).

@@ -92,6 +92,23 @@ class SheetHalfplanes:
     residual: np.ndarray
 
 
+def plane_origin(normal: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    """(N, 3) q0: the point of each plane ``normal . x = offset`` (N, 3 unit;
+    N,) nearest the voxel's centre, voxel-local, where the sheets' lines
+    are measured from."""
+    n = np.asarray(normal, dtype=np.float64).reshape(-1, 3)
+    d = np.asarray(offset, dtype=np.float64).reshape(-1)
+    return 0.5 - (n.sum(axis=1) * 0.5 - d)[:, None] * n
+
+
+def line_inward(angle: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """(N, 3) the inward unit direction u (into the covered side) of lines at
+    ``angle`` (N,) in the tangent frame of the unit ``normal`` (N, 3)."""
+    t1, t2 = tangent_frame(normal)
+    th = np.asarray(angle, dtype=np.float64).reshape(-1)
+    return np.cos(th)[:, None] * t1 + np.sin(th)[:, None] * t2
+
+
 def section_polygons(normal: np.ndarray, offset: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The sections of the unit cube by the planes ``normal . x = offset``
     (N, 3 unit; N,) as closed convex polygons in the planes' tangent frames
@@ -102,7 +119,7 @@ def section_polygons(normal: np.ndarray, offset: np.ndarray) -> tuple[np.ndarray
     n = np.asarray(normal, dtype=np.float64).reshape(-1, 3)
     d = np.asarray(offset, dtype=np.float64).reshape(-1)
     t1, t2 = tangent_frame(n)
-    q0 = 0.5 - (n.sum(axis=1) * 0.5 - d)[:, None] * n
+    q0 = plane_origin(n, d)
     na = n[:, _EDGE_AXIS]  # (N, 12)
     start_dot = n @ _EDGE_START.T  # (N, 12)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -176,8 +193,7 @@ def fit_halfplanes(normal, offset, area, centroid, turns: int = 3) -> tuple[np.n
     n = np.asarray(normal, dtype=np.float64).reshape(-1, 3)
     d = np.asarray(offset, dtype=np.float64).reshape(-1)
     N = len(n)
-    q0 = 0.5 - (n.sum(axis=1) * 0.5 - d)[:, None] * n
-    rel = np.asarray(centroid, np.float64).reshape(-1, 3) - q0
+    rel = np.asarray(centroid, np.float64).reshape(-1, 3) - plane_origin(n, d)
     target = np.stack([np.einsum("nk,nk->n", rel, frame[:, 0]), np.einsum("nk,nk->n", rel, frame[:, 1])], 1)
     section, s_cent, _ = clipped_piece(x, y, np.tile([1.0, 0.0], (N, 1)), np.full(N, -1e9))
     want = np.minimum(np.asarray(area, np.float64).reshape(-1), section)
@@ -248,23 +264,19 @@ def sheet_halfplanes(texture, sheets, surface: np.ndarray) -> SheetHalfplanes:
     )  # fmt: skip
     if len(rows) == 0:
         return SheetHalfplanes(mask, angle, offset, residual)
-    h = float(texture.voxel_size)
-    owner = np.asarray(texture.entry_voxel, dtype=np.int64)
     # First a cheap pass (the fit's cost): only entries whose covered side,
     # taken from the plane's point nearest the voxel's centre towards the
     # facets' centroid, goes on past the voxel.
-    local = (np.asarray(texture.entry_centroid, np.float64)[rows] - np.asarray(texture.origin, np.float64)) / h
-    local -= np.asarray(texture.coords, np.float64)[owner[rows]]
+    local = texture.local_centroids(rows)
     n = sheets.normal[rows]
-    rel = local - (0.5 - (n.sum(axis=1) * 0.5 - sheets.offset[rows])[:, None] * n)
+    rel = local - plane_origin(n, sheets.offset[rows])
     t1, t2 = tangent_frame(n)
     angle[rows] = np.arctan2(np.einsum("nk,nk->n", rel, t2), np.einsum("nk,nk->n", rel, t1))
     rows = rows[_continued(texture, sheets, surface, angle, rows)]
     for start in range(0, len(rows), _CHUNK):
         r = rows[start : start + _CHUNK]
-        local = (np.asarray(texture.entry_centroid, np.float64)[r] - np.asarray(texture.origin, np.float64)) / h
-        local -= np.asarray(texture.coords, np.float64)[owner[r]]
-        th, c, res, _, _ = fit_halfplanes(sheets.normal[r], sheets.offset[r], sheets.area[r], local)
+        th, c, res, _, _ = fit_halfplanes(sheets.normal[r], sheets.offset[r], sheets.area[r],
+                                          texture.local_centroids(r))  # fmt: skip
         angle[r], offset[r], residual[r] = th, c, res
     mask[rows] = residual[rows] <= HALF_TOLERANCE
     mask[mask] = _continued(texture, sheets, surface, angle, np.flatnonzero(mask))
@@ -288,9 +300,7 @@ def _continued(texture, sheets, surface: np.ndarray, angle: np.ndarray, rows: np
     shape = np.asarray(texture.shape, dtype=np.int64)
     coords = np.asarray(texture.coords, dtype=np.int64)
     owner = np.asarray(texture.entry_voxel, dtype=np.int64)
-    h = float(texture.voxel_size)
-    local = (np.asarray(texture.entry_centroid, np.float64)[rows] - np.asarray(texture.origin, np.float64)) / h
-    local -= coords[owner[rows]]
+    local = texture.local_centroids(rows)
     q = local + u
     step = np.floor(q).astype(np.int64)
     cell = coords[owner[rows]] + step
@@ -335,11 +345,8 @@ def halfplane_ramp(angle, offset, plane, point, normal, w, foot) -> np.ndarray:
     n = np.asarray(normal, dtype=np.float64).reshape(-1, 3)
     p = np.asarray(point, dtype=np.float64).reshape(-1, 3)
     w = np.asarray(w, dtype=np.float64)
-    t1, t2 = tangent_frame(n)
-    th = np.asarray(angle, dtype=np.float64).reshape(-1)
-    u = np.cos(th)[:, None] * t1 + np.sin(th)[:, None] * t2
-    q0 = 0.5 - (n.sum(axis=1) * 0.5 - np.asarray(plane, np.float64).reshape(-1))[:, None] * n
-    e = np.einsum("nk,nk->n", p - q0, u) - np.asarray(offset, np.float64).reshape(-1)
+    u = line_inward(angle, n)
+    e = np.einsum("nk,nk->n", p - plane_origin(n, plane), u) - np.asarray(offset, np.float64).reshape(-1)
     tw = np.cross(n, u) @ w
     dist = e * np.abs(n @ w) / np.sqrt(np.maximum(1.0 - tw * tw, 1e-12))
     foot = np.broadcast_to(np.asarray(foot, dtype=np.float64), e.shape)

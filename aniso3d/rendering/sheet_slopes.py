@@ -79,9 +79,7 @@ def sheet_slopes(texture, sheets, surface: np.ndarray) -> SheetSlopes:
     keys = cell_keys(coords, grid)
     offsets = np.asarray(texture.entry_offsets, dtype=np.int64)
     owner = np.asarray(texture.entry_voxel, dtype=np.int64)
-    h = float(texture.voxel_size)
-    local = (np.asarray(texture.entry_centroid, np.float64) - np.asarray(texture.origin, np.float64)) / h
-    local -= coords[owner]
+    local = texture.local_centroids()
     normal = np.asarray(texture.entry_normal, dtype=np.float64)
     kd = np.asarray(texture.entry_kd, dtype=np.float64)
     n = nh[rows]

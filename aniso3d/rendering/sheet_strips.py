@@ -46,6 +46,7 @@ from aniso3d.rendering.sheet_halfplanes import (
     decoded_offset,
     halfplane_ramp,
     offset_code,
+    plane_origin,
     section_polygons,
 )
 
@@ -128,8 +129,7 @@ def fit_strips(normal, offset, area, centroid, axis) -> tuple[np.ndarray, ...]:
     u3 = np.cross(n, t)
     theta = np.arctan2(np.einsum("nk,nk->n", u3, frame[:, 1]), np.einsum("nk,nk->n", u3, frame[:, 0]))
     u = np.stack([np.cos(theta), np.sin(theta)], axis=1)
-    q0 = 0.5 - (n.sum(axis=1) * 0.5 - d)[:, None] * n
-    rel = np.asarray(centroid, np.float64).reshape(-1, 3) - q0
+    rel = np.asarray(centroid, np.float64).reshape(-1, 3) - plane_origin(n, d)
     target = np.stack([np.einsum("nk,nk->n", rel, frame[:, 0]), np.einsum("nk,nk->n", rel, frame[:, 1])], 1)
     g = np.einsum("nk,nk->n", target, u)
     s = x * u[:, 0:1] + y * u[:, 1:2]
@@ -209,13 +209,10 @@ def sheet_strips(texture, sheets, surface: np.ndarray, halfplanes: SheetHalfplan
     i, j = _partners(texture, candidate, closed, sheets.normal)
     if len(i) == 0:
         return _with_halfplanes(SheetStrips(mask, angle, lo, hi, residual), halfplanes, closed)
-    h = float(texture.voxel_size)
-    owner = np.asarray(texture.entry_voxel, dtype=np.int64)
     fits = []
     for start in range(0, len(i), _CHUNK):
         a, b = i[start : start + _CHUNK], j[start : start + _CHUNK]
-        local = (np.asarray(texture.entry_centroid, np.float64)[a] - np.asarray(texture.origin, np.float64)) / h
-        local -= np.asarray(texture.coords, np.float64)[owner[a]]
+        local = texture.local_centroids(a)
         axis = np.cross(sheets.normal[a], sheets.normal[b])
         th, c0, c1, res, err = fit_strips(sheets.normal[a], sheets.offset[a], sheets.area[a], local, axis)
         fits.append((th, c0, c1, np.where(err <= STRIP_AREA_ERROR, res, np.inf)))

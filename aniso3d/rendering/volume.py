@@ -734,10 +734,7 @@ def entry_sheets(texture: AnisoTexture, voxels: np.ndarray | None = None) -> Ent
     # both faces show (the cube's FLIP rose close up); a thin
     # solid's back is taken out of its density instead (aniso3d.build.closure).
     area = np.asarray(texture.entry_area, dtype=np.float64)[rows]
-    h = float(texture.voxel_size)
-    cell = np.asarray(texture.coords, dtype=np.float64)[texture.entry_voxel[rows]]
-    centroid = np.asarray(texture.entry_centroid, np.float64)[rows]
-    local = (centroid - np.asarray(texture.origin, np.float64)) / h - cell
+    local = texture.local_centroids(rows)
     nh, d, section = _sections(n, local)
     # The voxel's facets together: net area along their mean normal over the
     # section of the plane through their centroid. A surface whose facets are
@@ -970,12 +967,14 @@ def sheet_terms(
         hit, band_all, t_hit, foot, lo, hi = _crossings(s_in, nw, ch, sh.slack[at], a_s, pixels, edges)
         surface = (foot > 0.0) & in_runs & (a_s > 0)
         ramp = np.ones((len(rows), 2))
+        # Crease sheets' half-planes: in a run, shaded flat and cut by their lines.
+        crease_line = layout.halfplanes.mask[rows] & sh.crease[at] if layout is not None else np.zeros(len(rows), bool)
         if layout is not None and surface.any():
             e = np.flatnonzero(surface & (layout.edges.face[rows] >= 0).any(axis=1))
             if len(e):
                 ramp[e] = _edge_ramps(layout.edges, rows[e], None, x[e], nh[e], s_in[e], nw[e], w, foot[e])
             # A crease sheet in a run: its half-plane's line cuts it as an edge (sheet_creases).
-            e = np.flatnonzero(surface & layout.halfplanes.mask[rows] & sh.crease[at])
+            e = np.flatnonzero(surface & crease_line)
             if len(e):
                 with np.errstate(divide="ignore", invalid="ignore"):
                     p = x[e] + w[None, :] * np.where(nw[e] != 0.0, -s_in[e] / nw[e], 0.0)[:, None]
@@ -992,7 +991,7 @@ def sheet_terms(
             # The run's sheets shaded where the ray crosses their planes, by
             # their linear models across them (sheet_slopes); a crease
             # sheet's half-plane flat (its line takes the model's word).
-            e = np.flatnonzero(surface & ~(layout.halfplanes.mask[rows] & sh.crease[at]))
+            e = np.flatnonzero(surface & ~crease_line)
             with np.errstate(divide="ignore", invalid="ignore"):
                 p = x[e] + w[None, :] * np.where(nw[e] != 0.0, -s_in[e] / nw[e], 0.0)[:, None]
             there = smoothed(np.asarray(texture.entry_normal, np.float64)[rows[e]],
@@ -1148,7 +1147,7 @@ def _sheet_halfplanes(texture: AnisoTexture, sheets: EntrySheets) -> tuple[Sheet
     kept crease half-plane's partner angle, 0 elsewhere."""
     hp = sheet_halfplanes(texture, sheets, sheets.plain_surface)
     rows = np.flatnonzero(hp.mask & sheets.crease)
-    phi, tilt, gap = crease_partners(texture, sheets, hp, rows, with_fit=True)
+    phi, tilt, gap = crease_partners(texture, sheets, hp, rows)
     edge = (tilt <= CREASE_TILT) & (gap <= CREASE_GAP)
     mask = hp.mask.copy()
     mask[rows[~edge]] = False
