@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import aniso3d
+from aniso3d.rendering import volume
 from aniso3d.rendering.camera import Camera
 from aniso3d.rendering.images import save_png
 from aniso3d.rendering.sheet_edges import GRID_PAD
@@ -156,6 +157,45 @@ def test_start_pass_only_where_it_pays(r, scenes):
         img = r.render(tex, cam, "volume", size=SIZE, alpha=True)
         assert not impl.last_start_pass
         assert np.isfinite(img).all()
+
+
+@pytest.mark.gpu
+@pytest.mark.parametrize("name", ["lattice", "tree"])
+def test_screen_box_draws_the_full_frame_image(r, scenes, name, monkeypatch):
+    """The march drawn only in the occupied bricks' screen box (a scissor)
+    draws the image of the march over every pixel, bit for bit: far (the box
+    a small part of the frame), off the view axis at both sides (the box at
+    the frame's edges and past them: its orientation and clamping), near,
+    and with the eye inside the grid (no box)."""
+    tex = scenes[name]
+    lo, hi = tex.bounds
+    mid, ext = 0.5 * (lo + hi), float(np.max(hi - lo))
+    cams = [
+        Camera.frame(tex.bounds, direction=(0.7, 0.2, 0.6), distance_scale=3.0),
+        Camera(position=tuple(mid + (0.3 * ext, 0.9 * ext, 2.0 * ext)), target=tuple(mid + (0.4 * ext, 0.5 * ext, 0)),
+               fov=40.0),  # fmt: skip
+        Camera(position=tuple(mid + (-0.8 * ext, -0.4 * ext, 1.5 * ext)),
+               target=tuple(mid - (0.5 * ext, 0.6 * ext, 0)), fov=40.0),  # fmt: skip
+        Camera.frame(tex.bounds, direction=(0.1, 0.9, 0.3), distance_scale=0.6),
+        Camera(position=tuple(mid), target=tuple(hi), fov=60.0),
+    ]
+    size = (80, 64)
+    boxes = []
+    real_box = volume.screen_box
+
+    def recorded(*args):
+        boxes.append(real_box(*args))
+        return boxes[-1]
+
+    monkeypatch.setattr(volume, "screen_box", recorded)
+    for k, cam in enumerate(cams):
+        cut = r.render(tex, cam, "volume", size=size, alpha=True)
+        full = r.render(tex, cam, "volume", size=size, alpha=True, start="frame")
+        np.testing.assert_array_equal(cut, full, err_msg=f"{name} camera {k}")
+        assert (full[..., 3] > 0).any(), (name, k)
+    assert len(boxes) == len(cams)
+    assert boxes[0] is not None and boxes[0][2] * boxes[0][3] < 0.5 * size[0] * size[1], boxes[0]
+    assert boxes[-1] is None
 
 
 @pytest.mark.gpu
