@@ -1894,8 +1894,14 @@ class VolumeRenderer:
         )  # fmt: skip
         self.last_start_pass = bool(start)
         prog, vao = self._program(opts.march, opts, start=start)
+        # Only the pixels the grid can cover run the march (not with
+        # blend_over: a scene's instances set their own scissor).
+        box = (
+            None if self.blend_over or opts.start == "frame"
+            else screen_box(handle, cam.position, (right, up, forward), t, view.size)
+        )  # fmt: skip
         if start:
-            self._start_pass(handle, view, rays, (right, up, forward), t)
+            self._start_pass(handle, view, rays, (right, up, forward), t, box)
         GLContext.set_uniforms(
             prog,
             {
@@ -1937,12 +1943,6 @@ class VolumeRenderer:
             ctx.enable(moderngl.BLEND)
             ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
             ctx.depth_func = "1"  # always
-        # Only the pixels the grid can cover run the march (a caller's own
-        # scissor, as a scene's instances set, is kept).
-        box = (
-            None if self.blend_over or opts.start == "frame"
-            else screen_box(handle, cam.position, (right, up, forward), t, view.size)
-        )  # fmt: skip
         target = ctx.fbo
         try:
             if box is not None:
@@ -2090,9 +2090,13 @@ class VolumeRenderer:
                 raise ResourceError(f"uploading the volume failed (out of GPU memory?): {exc}") from None
         return handle.buffers
 
-    def _start_pass(self, handle: GPUVolume, view: FrameView, rays: dict, basis: tuple, tan_half: float) -> None:
+    def _start_pass(
+        self, handle: GPUVolume, view: FrameView, rays: dict, basis: tuple, tan_half: float,
+        box: tuple[int, int, int, int] | None,
+    ) -> None:  # fmt: skip
         """Draw the start pass (volume_start.vert/.frag) of ``handle`` into the
-        renderer's R32F target of the view's size (``self._start``); the bound
+        renderer's R32F target of the view's size (``self._start``), only in
+        the pixels ``box`` (:func:`screen_box`; None: all); the bound
         framebuffer stays bound."""
         ctx = self.gl.ctx
         size = (int(view.size[0]), int(view.size[1]))
@@ -2126,6 +2130,7 @@ class VolumeRenderer:
         vao = ctx.vertex_array(prog, [(handle.brick_cells, "3f/i", "in_brick")])
         try:
             fbo.use()
+            fbo.scissor = box
             fbo.clear(_BIG, 0.0, 0.0, 0.0)
             ctx.disable(moderngl.DEPTH_TEST)
             ctx.enable(moderngl.CULL_FACE | moderngl.BLEND)
@@ -2137,6 +2142,7 @@ class VolumeRenderer:
             ctx.blend_equation = moderngl.FUNC_ADD
             ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
             vao.release()
+            fbo.scissor = None
             bound.use()
 
     def release(self, handle: GPUVolume | GPULodVolume) -> None:
