@@ -186,9 +186,11 @@ MARCH_MODES = ("skip", "plain")
 START_MODES = ("bricks", "box", "frame")
 #: The start pass is drawn when a voxel at the grid's front spans at least
 #: this many pixels: measured (CPU time, docs/volume_speed.md) it saves 1 to
-#: 9% of the frame on the corpus at 8 px, 7% on the tree at 4 px, and costs
-#: up to 14% (its own fixed cost) where voxels are under a pixel.
-START_PIXELS = 4.0
+#: 9% of the frame on the corpus at 8 px, 7% on the tree at 4 px; drawn only
+#: in the screen box, it saves a median 2% at 2 px (-11% to +4% per scene),
+#: breaks even at 1 px and costs up to 11% at 0.5 px
+#: (demos/sweep_start_pixels.py).
+START_PIXELS = 2.0
 #: Voxels by which the start pass widens each brick's box: the pass keeps a
 #: ray's entry into the widened box, at least half a voxel before its entry
 #: into the brick, far more than float32 rounding of the rasterised depth.
