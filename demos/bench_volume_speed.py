@@ -1,7 +1,8 @@
 """Frame time of the volume renderer against 1-spp polygons: the first
 marching ("plain"), the "skip" marching as it was ("before": its modes read
-as uniforms, rays from the grid's box) and as it is ("skip": the modes
-compiled in, the start pass where it pays), per scene and bench distance;
+as uniforms, every pixel's ray from the grid's box) and as it is ("skip":
+the modes compiled in, only the pixels of the occupied bricks' screen box,
+the start pass where it pays), per scene and bench distance;
 and the accuracy of both at the corpus cameras.
 
 The default tree at --size (1024) and every corpus scene at --corpus-size
@@ -39,10 +40,13 @@ from aniso3d.bench.settings import PRESETS
 from aniso3d.files import atomic_write
 from aniso3d.metrics import compare_in_box
 from aniso3d.rendering.renderer import Renderer
+from aniso3d.rendering.volume import START_PIXELS
 
 #: The volume cases: marching, whether the modes are compiled in
 #: (VolumeRenderer.compile_modes), and where rays start (VolumeOptions.start).
-VOLUME_CASES = {"plain": ("plain", False, "box"), "before": ("skip", False, "box"), "skip": ("skip", True, "bricks")}
+VOLUME_CASES = {
+    "plain": ("plain", False, "frame"), "before": ("skip", False, "frame"), "skip": ("skip", True, "bricks"),
+}  # fmt: skip
 
 
 def render_case(r: Renderer, thing, cam, case: str):
@@ -175,10 +179,11 @@ def main() -> None:
         "",
         'Default texture (128^3, K = 16), default options (opacity "planar"). Per camera of the bench '
         '(`fill`, then a baseline voxel of 2 ... 0.25 px), polygons, "plain" (the first marching: '
-        'storage buffers, compositing inside the two-level DDA, T_MIN 0.001), "before" (the '
-        '"skip" marching as it was: the density, normal and opacity modes read as uniforms, rays '
-        'from the grid\'s box) and "skip" (now the default: the modes compiled in, rays from the '
-        "first occupied brick where a voxel spans 4 px or more) are timed interleaved: "
+        'storage buffers, compositing inside the two-level DDA, T_MIN 0.001, every pixel), "before" (the '
+        '"skip" marching as it was: the density, normal and opacity modes read as uniforms, every '
+        'pixel\'s ray from the grid\'s box) and "skip" (now the default: the modes compiled in, only '
+        "the pixels of the occupied bricks' screen box, rays from the first occupied brick where a "
+        f"voxel spans {START_PIXELS:g} px or more) are timed interleaved: "
         "median (min-max) of draw + read back, ms, and the median process CPU time (ms, every "
         "llvmpipe thread: steadier than wall time on a shared machine). PSNR against 8x8 polygons "
         "in the bench's crop box "
