@@ -2222,8 +2222,9 @@ def screen_box(
     occupied bricks' bounding box projects to, a pixel wider each side, or
     None (every pixel) when a corner of that box lies within half a voxel of
     the eye's plane or behind it. volume.frag discards the rays that miss the
-    grid, but on llvmpipe each discarded pixel still costs its ray's setup:
-    a fixed 20-30 ms at 512^2 (docs/volume_speed.md, "Screen box"). ``basis``:
+    grid, but on llvmpipe each discarded pixel still costs its ray's set-up,
+    about 190 ms of CPU time a 1024^2 frame (docs/volume_speed.md, the screen
+    box's findings). ``basis``:
     the camera's right, up, forward (unit); ``tan_half``: tan(fov / 2)."""
     if handle.n_bricks == 0:
         return (0, 0, 0, 0)
