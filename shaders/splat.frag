@@ -7,12 +7,13 @@
 #endif
 // Splat renderer (c), fragment stage: the exact ray-splat intersection.
 // In: SplatData (flat, from splat.vert or splat.geom; see splat.vert for the
-// homography rows hu, hv, hw, hc), gl_FragCoord. Uniforms: u_viewport,
-// u_srange and u_depth (below); for PASS 2 also u_ray (columns f, R, U: the
-// eye ray of NDC (x, y) is f + x R + y U), u_visible and lighting.glsl's.
-// With AA the sprites read no uniform (splat.vert passes what they need per
-// splat, the rows over pixel offsets from SplatData.org), only the images
-// u_mask and u_surfaces; the geometry path's per-pixel shading reads u_ray,
+// homography rows hu, hv, hw, hc, over pixel offsets from SplatData.org),
+// gl_FragCoord. The intersection reads no uniform (splat.vert passes what it
+// needs per splat: on llvmpipe a uniform costs a gather per load). Without
+// AA, PASS 2 and FORWARD also read u_ray (columns f, R, U: the eye ray of
+// NDC (x, y) is f + x R + y U), u_viewport, u_visible (PASS 2) and
+// lighting.glsl's. With AA the sprites read only the images u_mask and
+// u_surfaces; the geometry path's per-pixel shading reads u_ray,
 // u_viewport, u_shade_box and lighting.glsl's.
 // Defines: ROUND (0: square |u|, |v| <= 1; 1: disc/ellipse u^2 + v^2 <= 1,
 // the ellipse being a disc in stretched axes); PASS:
@@ -96,8 +97,6 @@
 #endif
 
 uniform vec2 u_viewport;
-uniform vec2 u_srange;  // (near - t0, far - t0): the range of t - t0
-uniform vec2 u_depth;   // (K, t0 - near): window depth = K (t - near) / t
 #ifdef AA
 uniform float u_range;  // far - near
 uniform vec2 u_slices;  // (lo, scale): slice coordinate (z - lo) scale of a linear depth z
@@ -303,13 +302,9 @@ float last_layer_weight(float u, uvec4 r) {
 #endif
 
 void main() {
-#ifdef AA
     // Rows over pixel offsets from fs_in.org (splat.vert), so that no uniform
     // is read here (on llvmpipe a uniform costs a gather per load).
     vec3 xy1 = vec3(1.0, gl_FragCoord.xy - fs_in.org);
-#else
-    vec3 xy1 = vec3(1.0, gl_FragCoord.xy / u_viewport * 2.0 - 1.0);
-#endif
     vec3 h = vec3(dot(fs_in.hu, xy1), dot(fs_in.hv, xy1), dot(fs_in.hw, xy1));
     float sw = -dot(fs_in.hc, xy1);  // (t - t0) w'
 #ifdef AA
@@ -377,9 +372,9 @@ void main() {
     bool inside = max(abs(h.x), abs(h.y)) <= h.z;
 #endif
     // In front of the eye (w' > 0) and near <= t <= far.
-    inside = inside && h.z > 0.0 && sw >= u_srange.x * h.z && sw <= u_srange.y * h.z;
+    inside = inside && h.z > 0.0 && sw >= fs_in.frame.x * h.z && sw <= fs_in.frame.y * h.z;
     // (t - near) w', for the window depth K (t - near) / t = kn (t - near) w'.
-    float tw = u_depth.y * h.z + sw;
+    float tw = fs_in.frame.z * h.z + sw;
     vec2 uv = vec2(0.0);
     if (inside) {
 #if PASS == 2
@@ -391,20 +386,21 @@ void main() {
 #if PASS == 0
     gl_FragDepth = inside ? fs_in.kn * tw : fs_in.centre_z;
 #ifdef FORWARD
-    f_color = vec4(clamp(shade(fs_in.n, -normalize(u_ray * xy1), fs_in.kd, fs_in.spec.x, fs_in.spec.y,
-                               length(fs_in.n)), 0.0, 1.0), 1.0);
+    vec3 ray = u_ray * vec3(1.0, gl_FragCoord.xy / u_viewport * 2.0 - 1.0);
+    f_color = vec4(clamp(shade(fs_in.n, -normalize(ray), fs_in.kd, fs_in.spec.x, fs_in.spec.y, length(fs_in.n)),
+                         0.0, 1.0), 1.0);
 #else
     f_id = uint(fs_in.id);
 #endif
 #elif PASS == 1
     float pw = fs_in.push * h.z;
-    gl_FragDepth = inside ? u_depth.x * (tw + pw) / (fs_in.num + pw) : fs_in.centre_zp;
+    gl_FragDepth = inside ? fs_in.frame.w * (tw + pw) / (fs_in.num + pw) : fs_in.centre_zp;
 #else
     float depth = inside ? fs_in.kn * tw : fs_in.centre_z;
     // 3e-7: a few steps of a 24-bit depth buffer, so the front splat always
     // passes its own (pushed, then quantised) visibility depth.
     if (depth > texelFetch(u_visible, ivec2(gl_FragCoord.xy), 0).r + 3e-7) discard;
-    vec3 d = u_ray * xy1;
+    vec3 d = u_ray * vec3(1.0, gl_FragCoord.xy / u_viewport * 2.0 - 1.0);
     vec3 rgb = clamp(shade(fs_in.n, -normalize(d), fs_in.kd, fs_in.spec.x, fs_in.spec.y, length(fs_in.n)), 0.0, 1.0);
     float k = exp(-2.0 * dot(uv, uv));
     f_color = vec4(rgb * k, k);

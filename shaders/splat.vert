@@ -56,11 +56,11 @@
 // u_regime.x and .y pixels), linear depths (t - near) / (far - near) of the
 // centre (centre_z, centre_zp) and of its bounding sphere (zrange), the box
 // drawn (clip) and, in PASS 2, its colour shaded once at the centre (for
-// sub-pixel splats and the layers behind the first). With AA the rows hu, hv,
-// hw, hc are over (1, p - org), p the pixel coordinates (gl_FragCoord) and
-// org a pixel of the box, instead of (1, x, y) in NDC, and the uniforms the
-// fragment stage needs come per splat (srange, lmap, pushz): see the end of
-// main().
+// sub-pixel splats and the layers behind the first). The rows hu, hv, hw, hc
+// leave this stage over (1, p - org), p the pixel coordinates (gl_FragCoord)
+// and org a pixel of the box, instead of (1, x, y) in NDC, and the uniforms
+// the fragment stage needs come per splat (with AA srange, lmap, pushz;
+// without, frame): see the end of main().
 
 uniform vec3 u_q0;           // e + t0 f, local frame (see above)
 uniform float u_t0;          // view depth of the local origin
@@ -71,6 +71,7 @@ uniform vec2 u_viewport;     // framebuffer size, pixels
 uniform float u_near;        // clip distances, world units along the view axis
 uniform float u_far;
 uniform vec2 u_depth;        // (K, delta): window depth = K (t - near) / t, delta = t0 - near
+uniform vec2 u_srange;       // (near - t0, far - t0): the range of t - t0
 uniform vec2 u_extent;       // shape half-axes per unit of in_size
 uniform float u_max_sprite;  // widest point sprite the sprite path may draw, pixels
 uniform float u_push;        // visibility push-back, in units of the larger half-axis
@@ -84,7 +85,6 @@ uniform bool u_one_sided;    // cull one-sided points seen from behind (the eye 
 uniform float u_size_factor; // the shape's linear scale over its true area's
 uniform vec2 u_regime;       // sqrt(true projected area) in pixels: box formula below x, exact shape above y
 uniform float u_range;       // far - near
-uniform vec2 u_srange;       // (near - t0, far - t0): the range of t - t0
 uniform vec2 u_slices;       // (lo, scale): slice coordinate (z - lo) scale of a linear depth z
 uniform float u_span;        // the depth one surface spans, slices
 #if PASS == 2
@@ -428,13 +428,12 @@ void main() {
         cull();
         return;
     }
-#ifdef AA
-    vs_out.clip = vec4(lo, hi);
     // The fragment stage reads no uniforms: llvmpipe loads a uniform there as
     // a bounds-checked gather, lane by lane, which cost about 15 % of both
-    // passes. So the plane rows become rows over pixel offsets (1, p - org)
-    // from a pixel of the box (NDC x = (2 / W) p - 1), and the uniforms it
-    // needs are passed per splat.
+    // passes of quality "high" and 17 % of fast's geometry pass. So the plane
+    // rows become rows over pixel offsets (1, p - org) from a pixel of the
+    // box (NDC x = (2 / W) p - 1), and the uniforms it needs are passed per
+    // splat.
     vec2 org = floor(0.5 * (lo + hi)) + 0.5;
     vec3 at = vec3(1.0, org * (2.0 / u_viewport) - 1.0);
     vec3 per = vec3(1.0, 2.0 / u_viewport);
@@ -443,6 +442,10 @@ void main() {
     vs_out.hw = vec3(dot(vs_out.hw, at), vs_out.hw.yz * per.yz);
     vs_out.hc = vec3(dot(vs_out.hc, at), vs_out.hc.yz * per.yz);
     vs_out.org = org;
+#ifndef AA
+    vs_out.frame = vec4(u_srange, u_depth.y, u_depth.x);
+#else
+    vs_out.clip = vec4(lo, hi);
     vs_out.srange = u_srange;
     vs_out.lmap = vec4(u_depth.y / u_range, 1.0 / u_range, u_slices);
     vs_out.pushz = push / u_range;

@@ -39,8 +39,12 @@
 #define SPLAT_COVERAGE flat vec2 cpx; flat vec3 box; flat float regime; flat vec2 zrange; flat vec3 rgb; flat vec4 clip; flat vec2 org; flat vec2 srange; flat vec4 lmap; flat float pushz; flat float sided; flat float reachz; flat float graze; flat vec3 cut0; flat vec3 cut1;
 #define SPLAT_COPY_COVERAGE(d, s) d.cpx = s.cpx; d.box = s.box; d.regime = s.regime; d.zrange = s.zrange; d.rgb = s.rgb; d.clip = s.clip; d.org = s.org; d.srange = s.srange; d.lmap = s.lmap; d.pushz = s.pushz; d.sided = s.sided; d.reachz = s.reachz; d.graze = s.graze; d.cut0 = s.cut0; d.cut1 = s.cut1;
 #else
-#define SPLAT_COVERAGE
-#define SPLAT_COPY_COVERAGE(d, s)
+// Opaque splats (fast, blend): what the fragment stage would otherwise read
+// from uniforms (see splat.vert): the pixel the plane rows are taken about
+// (org) and (near - t0, far - t0, t0 - near, K) (frame: the range of t - t0,
+// and the window depth K (t - near) / t's offset and K).
+#define SPLAT_COVERAGE flat vec2 org; flat vec4 frame;
+#define SPLAT_COPY_COVERAGE(d, s) d.org = s.org; d.frame = s.frame;
 #endif
 
 #define SPLAT_DATA { SPLAT_PLANE SPLAT_CENTRE SPLAT_SHADING SPLAT_COVERAGE }
