@@ -19,6 +19,7 @@ from aniso3d.bench.peers import (
     camera_pose,
     erode,
     hole_stats,
+    import_failure,
     markers,
     report,
     run_peers,
@@ -215,6 +216,18 @@ def test_report_states_table_targets_and_load(tiny, tmp_path):
     page.write_text("# Title\n\nprose\n")
     write_report(result, page, "aniso3d bench peers")
     assert page.read_text().startswith("# Title\n\nprose\n\n" + begin) and page.read_text().endswith(end + "\n")
+
+
+def test_import_failure_says_what_is_missing():
+    """A peer that is not installed is told to pip install; one installed
+    without a system library its compiled part needs (Open3D without libusb)
+    is told which library, not to pip install what it has."""
+    gone = ModuleNotFoundError("No module named 'pyvista'", name="pyvista")
+    assert import_failure(gone) == "not installed (pyvista); pip install 'aniso3d[peers]'"
+    lib = ImportError("libusb-1.0.so.0: cannot open shared object file: No such file or directory", name="pybind")
+    text = import_failure(lib)
+    assert text.startswith("installed but cannot load: libusb-1.0.so.0: cannot open shared object file")
+    assert "pip install" not in text and "system library" in text
 
 
 @pytest.mark.gpu

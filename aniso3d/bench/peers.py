@@ -417,6 +417,17 @@ def _reply(obj: dict) -> None:
     _REPLIES.flush()
 
 
+def import_failure(exc: ImportError) -> str:
+    """Why a peer could not be imported, and what to do: not installed (a
+    missing Python module), or installed but missing a system library its
+    compiled part links against (Open3D's libusb, for one)."""
+    text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    if not isinstance(exc, ModuleNotFoundError) and "shared object" in text:
+        return (f"installed but cannot load: {text}; install that system library "
+                "(docs/peers.md lists what each peer needs)")  # fmt: skip
+    return f"not installed ({exc.name or text}); pip install 'aniso3d[peers]'"
+
+
 def worker_main(name: str, cfg_json: str) -> int:
     """A contender's process: set up, then answer commands on stdin, one JSON
     line per command on stdout (anything the libraries print goes to stderr).
@@ -437,7 +448,7 @@ def worker_main(name: str, cfg_json: str) -> int:
         contender = make_contender(name, cfg)
         contender.frame(base)  # warm-up: uploads, shader compilation
     except ImportError as exc:
-        _reply({"skip": f"not installed ({exc.name or exc}); pip install 'aniso3d[peers]'"})
+        _reply({"skip": import_failure(exc)})
         return 0
     except Exception as exc:  # a GL platform or driver the library cannot use here
         _reply({"skip": f"cannot run here: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"})
