@@ -21,8 +21,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from aniso3d import metrics
-from aniso3d.bench.corpus import corpus_cameras
 from aniso3d.bench.outputs import markdown_table
 from aniso3d.bench.variants import (
     SUMMARY_HEAD,
@@ -34,41 +32,27 @@ from aniso3d.bench.variants import (
     pair,
     publish,
     run_corpus_demo,
+    volume_mode_rows,
 )
 from aniso3d.build import scenes
-from aniso3d.build.texture import build_texture
 from aniso3d.rendering.renderer import Renderer
-from aniso3d.rendering.volume import EDGE_MODES
 
 BEGIN = "<!-- bench_volume_edges: begin -->"
 END = "<!-- bench_volume_edges: end -->"
 
 
+def edge_pixels(ref: np.ndarray) -> np.ndarray:
+    """The pixels the truth covers in part (silhouettes and edges)."""
+    return (ref[..., 3] > 5) & (ref[..., 3] < 250)
+
+
+def edge_error(img: np.ndarray, ref: np.ndarray, mask: np.ndarray) -> float:
+    """Mean |alpha - truth alpha| over ``mask``."""
+    return float((np.abs(img[..., 3].astype(np.float64) - ref[..., 3]) / 255.0)[mask].mean())
+
+
 def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
-    mesh = scenes.get_scene(name)
-    tex = build_texture(mesh, args.resolution, args.directions)
-    size = (args.size, args.size)
-    rows = []
-    for spec in corpus_cameras(mesh, size, args.resolution):
-        x0, y0, x1, y1 = spec.crop
-        truth = renderer.render(mesh, spec.camera, "mesh", ssaa=args.gt_ssaa, alpha=True)
-        ref = truth[y0:y1, x0:x1]
-        edge = (ref[..., 3] > 5) & (ref[..., 3] < 250)
-        row = {"scene": name, "camera": spec.label, "voxel_px": spec.voxel_px, "edge_px": int(edge.sum())}
-        for mode in EDGE_MODES:
-            img = renderer.render(tex, spec.camera, "volume", alpha=True, edges=mode)[y0:y1, x0:x1]
-            m = metrics.compare(ref[..., :3], img[..., :3], with_flip=True)
-            err = np.abs(img[..., 3].astype(np.float64) - ref[..., 3]) / 255.0
-            row[mode] = {"psnr": m["psnr"], "flip": m["flip"], "edge_err": float(err[edge].mean()), "times": []}
-        for _ in range(args.frames):  # the modes in turn: both see the same load
-            for mode in EDGE_MODES:
-                renderer.render(tex, spec.camera, "volume", edges=mode)
-                row[mode]["times"].append(renderer.last_frame_seconds)
-        rows.append(row)
-        f, s = row["filtered"], row["sampled"]
-        print(f"  {spec.label}: PSNR {s['psnr']:.2f} -> {f['psnr']:.2f}, FLIP {s['flip']:.4f} -> "
-              f"{f['flip']:.4f}, edge err {s['edge_err']:.3f} -> {f['edge_err']:.3f}", flush=True)  # fmt: skip
-    return rows
+    return volume_mode_rows(name, args, renderer, "edges", ("sampled", "filtered"), "edge", edge_pixels, edge_error)
 
 
 def main() -> None:

@@ -21,8 +21,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from aniso3d import metrics
-from aniso3d.bench.corpus import corpus_cameras
 from aniso3d.bench.outputs import markdown_table
 from aniso3d.bench.variants import (
     SUMMARY_HEAD,
@@ -34,9 +32,9 @@ from aniso3d.bench.variants import (
     pair,
     publish,
     run_corpus_demo,
+    volume_mode_rows,
 )
 from aniso3d.build import scenes
-from aniso3d.build.texture import build_texture
 from aniso3d.rendering.renderer import Renderer
 from aniso3d.rendering.volume import SHADING_MODES
 
@@ -55,32 +53,19 @@ def eroded(mask: np.ndarray, k: int) -> np.ndarray:
     return out
 
 
+def inside_pixels(ref: np.ndarray) -> np.ndarray:
+    """The pixels the truth covers whole, eroded by 2 (away from silhouettes)."""
+    return eroded(ref[..., 3] == 255, 2)
+
+
+def inside_error(img: np.ndarray, ref: np.ndarray, mask: np.ndarray) -> float:
+    """Mean |RGB - truth RGB| (1/255) over ``mask`` (NaN where it is empty)."""
+    err = np.abs(img[..., :3].astype(np.float64) - ref[..., :3]).mean(axis=-1)
+    return float(err[mask].mean()) if mask.any() else float("nan")
+
+
 def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
-    mesh = scenes.get_scene(name)
-    tex = build_texture(mesh, args.resolution, args.directions)
-    size = (args.size, args.size)
-    rows = []
-    for spec in corpus_cameras(mesh, size, args.resolution):
-        x0, y0, x1, y1 = spec.crop
-        truth = renderer.render(mesh, spec.camera, "mesh", ssaa=args.gt_ssaa, alpha=True)
-        ref = truth[y0:y1, x0:x1]
-        inside = eroded(ref[..., 3] == 255, 2)
-        row = {"scene": name, "camera": spec.label, "voxel_px": spec.voxel_px, "inside_px": int(inside.sum())}
-        for mode in MODES:
-            img = renderer.render(tex, spec.camera, "volume", alpha=True, shading=mode)[y0:y1, x0:x1]
-            m = metrics.compare(ref[..., :3], img[..., :3], with_flip=True)
-            err = np.abs(img[..., :3].astype(np.float64) - ref[..., :3]).mean(axis=-1)
-            inside_err = float(err[inside].mean()) if inside.any() else float("nan")
-            row[mode] = {"psnr": m["psnr"], "flip": m["flip"], "inside_err": inside_err, "times": []}
-        for _ in range(args.frames):  # the modes in turn: both see the same load
-            for mode in MODES:
-                renderer.render(tex, spec.camera, "volume", shading=mode)
-                row[mode]["times"].append(renderer.last_frame_seconds)
-        rows.append(row)
-        f, s = row["smooth"], row["flat"]
-        print(f"  {spec.label}: PSNR {s['psnr']:.2f} -> {f['psnr']:.2f}, FLIP {s['flip']:.4f} -> "
-              f"{f['flip']:.4f}, inside err {s['inside_err']:.2f} -> {f['inside_err']:.2f}", flush=True)  # fmt: skip
-    return rows
+    return volume_mode_rows(name, args, renderer, "shading", MODES, "inside", inside_pixels, inside_error, digits=2)
 
 
 def main() -> None:

@@ -22,6 +22,8 @@ from aniso3d.bench.corpus import corpus_cameras
 from aniso3d.bench.outputs import write_between_markers
 from aniso3d.bench.run import ScenesRun, run_scenes
 from aniso3d.build.mesh import Mesh
+from aniso3d.build.scenes import get_scene
+from aniso3d.build.texture import build_texture
 from aniso3d.rendering.renderer import Renderer
 
 #: The polygon baselines every row carries: label -> samples per pixel side.
@@ -67,6 +69,44 @@ def scene_cameras(renderer: Renderer, mesh: Mesh, name: str, args: argparse.Name
         for label, ssaa in POLYGON_BASELINES.items():
             row[label] = scored(truth, renderer.render(mesh, spec.camera, "mesh", ssaa=ssaa), spec)
         yield spec, truth, row
+
+
+def volume_mode_rows(
+    name: str, args: argparse.Namespace, renderer: Renderer, option: str, modes: tuple[str, str], what: str,
+    region: Callable[[np.ndarray], np.ndarray], error: Callable[[np.ndarray, np.ndarray, np.ndarray], float],
+    digits: int = 3,
+) -> list[dict]:  # fmt: skip
+    """Scene ``name`` at the default texture of ``args`` drawn by the volume
+    renderer with ``option`` set to each of ``modes`` (the one measured
+    against first), at the corpus cameras, scored against the polygons at
+    ``args.gt_ssaa`` squared samples inside the object's box. Per camera a
+    row: the scene, camera, ``voxel_px``, ``{what}_px`` (the pixels of the
+    box ``region(truth)`` marks) and per mode ``psnr``, ``flip``,
+    ``{what}_err`` (``error(image, truth, mask)``, both RGBA in the box) and
+    the frame ``times`` of ``args.frames`` frames, the modes drawn in turn
+    so that both see the same load."""
+    mesh = get_scene(name)
+    tex = build_texture(mesh, args.resolution, args.directions)
+    rows = []
+    for spec in corpus_cameras(mesh, (args.size, args.size), args.resolution):
+        x0, y0, x1, y1 = spec.crop
+        ref = renderer.render(mesh, spec.camera, "mesh", ssaa=args.gt_ssaa, alpha=True)[y0:y1, x0:x1]
+        mask = region(ref)
+        row = {"scene": name, "camera": spec.label, "voxel_px": spec.voxel_px, f"{what}_px": int(mask.sum())}
+        for mode in modes:
+            img = renderer.render(tex, spec.camera, "volume", alpha=True, **{option: mode})[y0:y1, x0:x1]
+            m = metrics.compare(ref[..., :3], img[..., :3], with_flip=True)
+            row[mode] = {"psnr": m["psnr"], "flip": m["flip"], f"{what}_err": error(img, ref, mask), "times": []}
+        for _ in range(args.frames):
+            for mode in modes:
+                renderer.render(tex, spec.camera, "volume", **{option: mode})
+                row[mode]["times"].append(renderer.last_frame_seconds)
+        rows.append(row)
+        o, n = row[modes[0]], row[modes[1]]
+        e = f"{what}_err"
+        print(f"  {spec.label}: PSNR {o['psnr']:.2f} -> {n['psnr']:.2f}, FLIP {o['flip']:.4f} -> "
+              f"{n['flip']:.4f}, {what} err {o[e]:.{digits}f} -> {n[e]:.{digits}f}", flush=True)  # fmt: skip
+    return rows
 
 
 def print_scores(label: str, row: dict) -> None:
