@@ -279,6 +279,8 @@ def main() -> None:
 
     changed = {k: v for k, v in asdict(args.bits).items() if v != getattr(DEFAULT_BITS, k)}
     bits_arg = ("--bits " + " ".join(f"{k}={v}" for k, v in changed.items()) + " ") if changed else ""
+    if not args.alternatives:
+        bits_arg += "--no-alternatives "
     worst = {m: min((d[i] for res in results for row, _, d in res["rows"] if row == "all"), default=math.nan)
              for i, m in enumerate(("volume", "splat"))}  # fmt: skip
     parts = [
