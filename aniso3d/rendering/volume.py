@@ -112,6 +112,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from typing import ClassVar
 
 import moderngl
@@ -1663,6 +1664,18 @@ class GPUVolume:
         marching's storage buffers come on top)."""
         return int(sum(self.sizes.values()))
 
+    @cached_property
+    def occupied_corners(self) -> np.ndarray:
+        """(8, 3) float64, world: the corners of the occupied bricks'
+        bounding box (what :func:`screen_box` projects each frame), found
+        once. Empty (0, 3) when no brick is occupied."""
+        if self.n_bricks == 0:
+            return np.zeros((0, 3))
+        lo = self.brick_grid.min(axis=0) * float(BRICK)
+        hi = np.minimum((self.brick_grid.max(axis=0) + 1) * float(BRICK), np.asarray(self.shape, np.float64))
+        pick = np.array([[i & 1, i >> 1 & 1, i >> 2 & 1] for i in range(8)]) > 0
+        return np.asarray(self.grid_origin, np.float64) + self.voxel_size * np.where(pick, hi, lo)
+
 
 @dataclass(eq=False)
 class GPULodVolume:
@@ -2228,16 +2241,10 @@ def screen_box(
     the camera's right, up, forward (unit); ``tan_half``: tan(fov / 2)."""
     if handle.n_bricks == 0:
         return (0, 0, 0, 0)
-    h = handle.voxel_size
-    lo = handle.brick_grid.min(axis=0) * float(BRICK)
-    hi = np.minimum((handle.brick_grid.max(axis=0) + 1) * float(BRICK), np.asarray(handle.shape, np.float64))
-    corners = np.asarray(handle.grid_origin, np.float64) + h * np.stack(
-        [np.where(np.array([i & 1, i >> 1 & 1, i >> 2 & 1]) > 0, hi, lo) for i in range(8)]
-    )
     right, up, forward = (np.asarray(a, np.float64) for a in basis)
-    rel = corners - np.asarray(eye, np.float64)
+    rel = handle.occupied_corners - np.asarray(eye, np.float64)
     z = rel @ forward
-    if float(z.min()) <= 0.5 * h:
+    if float(z.min()) <= 0.5 * handle.voxel_size:
         return None
     w, ht = int(size[0]), int(size[1])
     ty = float(tan_half)
