@@ -329,6 +329,25 @@ float edge_angle(uint code) {
     return float(code) * (6.283185307179586 / 256.0) - 3.141592653589793;
 }
 
+// The first tangent of a sheet's unit normal nh (the second: cross(nh, t1)).
+// Mirrors aniso3d/grid.py:tangent_frame.
+vec3 tangent_t1(vec3 nh) {
+    return normalize(cross(nh, abs(nh.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0)));
+}
+
+// The inward unit direction u of a line at angle theta in that tangent
+// frame. Mirrors render/sheet_halfplanes.py:line_inward.
+vec3 line_inward(float theta, vec3 nh) {
+    vec3 t1 = tangent_t1(nh);
+    return cos(theta) * t1 + sin(theta) * cross(nh, t1);
+}
+
+// q0: the point of the plane nh.x = d nearest the voxel's centre, where the
+// sheets' lines are measured from. Mirrors render/sheet_halfplanes.py:plane_origin.
+vec3 plane_origin(vec3 nh, float d) {
+    return vec3(0.5) - (dot(nh, vec3(0.5)) - d) * nh;
+}
+
 // Share of the pixel's footprint on the covered side of a line (its inward
 // normal u at angle theta in the tangent frame of nh, offset c) where the
 // ray crosses the sheet's plane nh.x = d at p: (p - q0).u - c from the line
@@ -336,10 +355,8 @@ float edge_angle(uint code) {
 // |n.w| / sqrt(1 - (t.w)^2) seen along the ray (t = n x u): a ramp over the
 // footprint, 1/2 on the line. Mirrors render/sheet_halfplanes.py:halfplane_ramp.
 float line_ramp(float theta, float c, vec3 p, vec3 nh, float nw, float d, float foot) {
-    vec3 t1 = normalize(cross(nh, abs(nh.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0)));
-    vec3 t2 = cross(nh, t1);
-    vec3 u = cos(theta) * t1 + sin(theta) * t2;
-    float e = dot(p - (vec3(0.5) - (dot(nh, vec3(0.5)) - d) * nh), u) - c;
+    vec3 u = line_inward(theta, nh);
+    float e = dot(p - plane_origin(nh, d), u) - c;
     float tw = dot(cross(nh, u), g_d);
     float dist = e * abs(nw) / sqrt(max(1.0 - tw * tw, 1e-12));
     return clamp(0.5 + dist / max(foot, 1e-12), 0.0, 1.0);
@@ -370,10 +387,7 @@ float strip_cover(uint w, float far, vec3 p, vec3 nh, float nw, float d, float f
 // render/sheet_creases.py:crease_factors.
 vec2 crease_factors(uint w, vec3 p, vec3 nh, float nw, float d, float foot) {
     float ramp = halfplane_ramp(w, p, nh, nw, d, foot);
-    vec3 t1 = normalize(cross(nh, abs(nh.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0)));
-    vec3 t2 = cross(nh, t1);
-    float theta = edge_angle((w >> 11u) & 255u);
-    vec3 u = cos(theta) * t1 + sin(theta) * t2;
+    vec3 u = line_inward(edge_angle((w >> 11u) & 255u), nh);
     vec3 nu = cross(g_d, cross(nh, u));
     float al = dot(nu, u);
     float be = dot(nu, nh);
@@ -396,9 +410,9 @@ vec3 smooth_sheet(uint e, uint slope, vec3 p, vec3 nh, float len_n, float d, vec
     vec2 m1 = unpackHalf2x16(m.y);  // dkd_r/dv, dkd_g/du
     vec2 m2 = unpackHalf2x16(m.z);  // dkd_g/dv, dkd_b/du
     vec2 m3 = unpackHalf2x16(m.w);  // dkd_b/dv
-    vec3 t1 = normalize(cross(nh, abs(nh.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0)));
+    vec3 t1 = tangent_t1(nh);
     vec3 t2 = cross(nh, t1);
-    vec3 rel = p - (vec3(0.5) - (dot(nh, vec3(0.5)) - d) * nh);
+    vec3 rel = p - plane_origin(nh, d);
     float u = clamp(dot(rel, t1), -1.0, 1.0);
     float v = clamp(dot(rel, t2), -1.0, 1.0);
     vec3 n = nh + (s12.x * u + s12.y * v) * t1 + (s12.y * u + m0.x * v) * t2;
