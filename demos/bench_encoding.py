@@ -1,4 +1,4 @@
-"""What the compact texture encoding (``.a3d`` version 6) costs in bytes and in image error.
+"""What the compact texture encoding (``.a3d`` version 7) costs in bytes and in image error.
 
 Per scene: the mesh, built at ``--resolution`` with K = ``--directions``
 (``build_texture``), its sizes (the mesh as a binary PLY: 12 bytes a vertex,

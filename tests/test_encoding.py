@@ -244,7 +244,8 @@ def test_facet_density_is_the_entries_projected_area():
 
 def test_bits_are_checked():
     bad_bits = (dict(area=1), dict(normal=17), dict(centroid=1), dict(kd=0), dict(density=-1), dict(ks=True),
-                dict(centroid=8.0), dict(depth=1), dict(depth=17))  # fmt: skip
+                dict(centroid=8.0), dict(depth=1), dict(depth=17),
+                dict(centroid_closed=1), dict(centroid_closed=17))  # fmt: skip
     for bad in bad_bits:
         with pytest.raises(InputError, match="bits for"):
             Bits(**bad)
@@ -298,7 +299,8 @@ def assert_within_bounds(tex: AnisoTexture, got: AnisoTexture, bits: Bits = DEFA
     # two tangent coordinates), then clamped into the voxel (which moves no
     # point farther from the original, inside it): half a step each
     _, s_depth = enc._steps(bits.depth)
-    _, s_plane = enc._steps(bits.centroid)
+    # (version 7: closed entries' in-plane codes have bits.centroid_closed)
+    _, s_plane = enc._steps(enc.plane_bits(tex.entry_side, bits))
     # version 5: a spread entry's depth within DEPTH_SPREAD_SHARE of how far its
     # facets lie off its plane, about sigma / 2 voxel
     half_depth = np.maximum(1 / (2 * s_depth), enc.DEPTH_SPREAD_SHARE * sigma / 2)
@@ -348,7 +350,7 @@ def assert_within_bounds(tex: AnisoTexture, got: AnisoTexture, bits: Bits = DEFA
 def test_tree_through_a_file_is_within_every_bound(tree_tex, tree_file):
     back = AnisoTexture.load(tree_file)
     f = read_texture_file(tree_file)
-    assert f.version == FORMAT_VERSION == 6 and f.encoding == "compact"
+    assert f.version == FORMAT_VERSION == 7 and f.encoding == "compact"
     with zipfile.ZipFile(tree_file) as zf:
         assert {i.compress_type for i in zf.infolist() if i.filename.endswith(".npy")} == {zipfile.ZIP_LZMA}
         assert zf.getinfo("header.json").compress_type == zipfile.ZIP_DEFLATED
@@ -357,7 +359,7 @@ def test_tree_through_a_file_is_within_every_bound(tree_tex, tree_file):
     for name in ARRAYS:
         a, b = getattr(back, name), getattr(ref, name)
         assert a.dtype == b.dtype and np.array_equal(a, b), name
-    assert back.meta == {**tree_tex.meta, QUANTISED: 6} and back.voxel_size == tree_tex.voxel_size
+    assert back.meta == {**tree_tex.meta, QUANTISED: 7} and back.voxel_size == tree_tex.voxel_size
     assert_within_bounds(tree_tex, back)
 
 
@@ -371,7 +373,7 @@ def test_bounds_hold_at_other_bits(tree_tex, bits):
 
 
 def test_more_bits_cost_more_bytes_and_err_less(tree_tex, tmp_path):
-    fine = Bits(area=16, normal=16, centroid=12, depth=12, kd=12, density=12)
+    fine = Bits(area=16, normal=16, centroid=12, centroid_closed=12, depth=12, kd=12, density=12)
     sizes = [tree_tex.save(tmp_path / f"{i}.a3d", bits=b).stat().st_size for i, b in enumerate((Bits(), fine))]
     assert sizes[0] < sizes[1]
     # on entries of flat facets (a spread entry's steps follow its spread, version 5)
@@ -541,7 +543,7 @@ def _set(name, fn):
 
 
 DAMAGED = [
-    ("future version", dict(header=lambda h: h.update(version=7)), "version 7.*Upgrade aniso3d.*aniso3d build"),
+    ("future version", dict(header=lambda h: h.update(version=8)), "version 8.*Upgrade aniso3d.*aniso3d build"),
     ("side code above 2", dict(members=_set("entry_side", lambda a: np.where(np.arange(len(a)) == 3, np.uint8(3), a))),
      "entry_side holds codes above 2"),
     ("side length", dict(members=_set("entry_side", lambda a: a[:-1])), "entry_side has shape"),
@@ -859,12 +861,14 @@ def test_stored_orders_lose_nothing(tree_tex):
     db = DEFAULT_BITS.depth - np.asarray(params["depth_shifts"])[q]
     assert len(np.unique(db)) > 1
     args = (tree_tex.origin, tree_tex.voxel_size, coords, voxel)
+    pb = enc.plane_bits(tree_tex.entry_side, DEFAULT_BITS)
+    assert len(np.unique(pb)) == 2
     codes, back = {}, {}
     for layout in (None, *enc.CENTROID_LAYOUTS):
         codes[layout] = enc._encode_centroid_frame(tree_tex.entry_centroid, *args, unit, src, DEFAULT_BITS, db,
-                                                   layout)  # fmt: skip
+                                                   layout, pb)  # fmt: skip
         back[layout] = enc._decode_centroid_frame(codes[layout], *args, unit, tangent_frame(unit), src,
-                                                  DEFAULT_BITS, db, layout)  # fmt: skip
+                                                  DEFAULT_BITS, db, layout, pb)  # fmt: skip
         # (the decoder's unit normals are float64 from their codes: within rounding of these)
         np.testing.assert_allclose(back[layout], got["entry_centroid"], rtol=0, atol=1e-6 * tree_tex.voxel_size)
     for layout in enc.CENTROID_LAYOUTS:
@@ -944,6 +948,74 @@ def test_version_5_compact_file_still_loads():
     # today's file of the same texture stores the sides
     members, params = enc.encode(dict(built._arrays()), built.voxel_size)
     assert np.array_equal(enc.decode(members, params, built.voxel_size)["entry_side"], built.entry_side)
+
+
+def test_version_6_compact_file_still_loads():
+    """tests/data/small_tree_v6.a3d was written by the version 6 writer (at
+    commit 61b2f51, the mesh of the version 5 fixture: a small tree and a
+    closed cube, ``build_texture(mesh, 12, 16)``; every in-plane centroid
+    code in 6 bits), and small_tree_v6_decoded.a3d (exact encoding) holds
+    what that writer's decoder gave for it: today's decoder gives exactly
+    those arrays, though today's files give the cube's entries 7 bits."""
+    f = read_texture_file(DATA / "small_tree_v6.a3d")
+    assert f.version == 6 and f.encoding == "compact"
+    with zipfile.ZipFile(DATA / "small_tree_v6.a3d") as zf:
+        assert "centroid_closed" not in json.loads(zf.read("header.json"))["params"]["bits"]
+    ref = read_texture_file(DATA / "small_tree_v6_decoded.a3d")
+    assert ref.version == 6 and ref.encoding == "exact"
+    for name in ARRAYS:
+        a, b = f.arrays[name], ref.arrays[name]
+        assert a.dtype == b.dtype and a.shape == b.shape, name
+        np.testing.assert_array_equal(a, b, err_msg=name)
+    back = AnisoTexture.load(DATA / "small_tree_v6.a3d")
+    assert back.meta[QUANTISED] == 6 and back.meta["source"] == "v6-fixture"
+    assert (back.entry_side != 0).sum() > 20
+    # today's encoding of the same arrays places the closed entries finer
+    arrays = {n: ref.arrays[n] for n in ARRAYS}
+    members, params = enc.encode(arrays, ref.voxel_size)
+    assert params["bits"]["centroid_closed"] == DEFAULT_BITS.centroid_closed > DEFAULT_BITS.centroid
+    assert not np.array_equal(enc.decode(members, params, ref.voxel_size)["entry_centroid"],
+                              f.arrays["entry_centroid"])  # fmt: skip
+
+
+def test_closed_entries_keep_finer_in_plane_centroids():
+    """Version 7: the in-plane centroid codes of entries on closed surfaces
+    (a thin beam's faces, which the volume draws as strips placed by their
+    centroid) have ``centroid_closed`` bits, the rest ``centroid``. Checked
+    on a truss of thin closed beams and open leaves together: the closed
+    entries' in-plane error stays within half a step of their bits (and
+    exceeds that bound at the open entries' bits), the open entries' within
+    theirs, and the open entries decode exactly as with one count for all."""
+    from aniso3d.build.mesh import concatenate
+
+    truss = scenes.lattice(cells=3, beam_width=0.15)
+    leaves = scenes.tree(levels=3, leaves_per_twig=12)
+    lo, hi = truss.bounds
+    s = (hi - lo).max() / (leaves.bounds[1] - leaves.bounds[0]).max()
+    m = np.diag([s, s, s, 1.0])
+    m[:3, 3] = lo - leaves.bounds[0] * s
+    tex = build_texture(concatenate([truss, leaves.transformed(m)]), 32, 16)
+    closed = tex.entry_side != 0
+    assert 0.2 < closed.mean() < 0.95
+
+    def in_plane_error(got):
+        n = got.entry_normal.astype(np.float64)
+        unit = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        d = (got.entry_centroid - tex.entry_centroid) / tex.voxel_size
+        d -= np.sum(d * unit, axis=1, keepdims=True) * unit
+        f2 = (got.entry_centroid - tex.origin) / tex.voxel_size - tex.coords[tex.entry_voxel]
+        inside = np.all((f2 > 1e-9) & (f2 < 1 - 1e-9), axis=1)
+        return np.linalg.norm(d, axis=1), inside
+
+    err, inside = in_plane_error(tex.as_stored())
+    half = {b: np.sqrt(2) / (2 * enc._steps(b)[1]) for b in (6, 7)}
+    assert err[closed & inside].max() <= half[7] * (1 + 1e-6)
+    assert err[~closed & inside].max() <= half[6] * (1 + 1e-6)
+    coarse, _ = in_plane_error(tex.as_stored(Bits(centroid_closed=6)))
+    assert coarse[closed & inside].max() > half[7]
+    assert np.mean(err[closed & inside]) < 0.7 * np.mean(coarse[closed & inside])
+    same = tex.as_stored(Bits(centroid_closed=6))
+    np.testing.assert_array_equal(tex.as_stored().entry_centroid[~closed], same.entry_centroid[~closed])
 
 
 def test_sides_decode_along_their_predictors_as_one_by_one():

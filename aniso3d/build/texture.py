@@ -90,7 +90,7 @@ def sphere_directions(k: int, kind: str = "fibonacci", seed: int = 0) -> np.ndar
 #: encoding (loaded from a compact file, or :meth:`AnisoTexture.as_stored`):
 #: its centroids and normals carry the encoding's rounding, which the volume
 #: renderer's sheet crossings allow for (:func:`aniso3d.rendering.volume.entry_sheets`).
-#: Its value is the file's format version (2 to 6; ``True`` in textures saved
+#: Its value is the file's format version (2 to 7; ``True`` in textures saved
 #: before version 3, which came from version 2 files): how fine the rounding is.
 QUANTISED = "quantised"
 
@@ -248,7 +248,7 @@ class AnisoTexture:
     @cached_property
     def nbytes(self) -> int:
         """Bytes of the texture as stored and shipped: the size of the ``.a3d``
-        file :meth:`save` writes by default (format version 6, compact
+        file :meth:`save` writes by default (format version 7, compact
         encoding, LZMA-compressed; :mod:`aniso3d.build.encoding`), computed in memory
         once. :attr:`memory_nbytes` is the size of the arrays in memory."""
         return encoded_size(self._arrays(), self.voxel_size, self.meta)

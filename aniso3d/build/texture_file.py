@@ -9,12 +9,15 @@ fixed compression level).
 
 Versions:
 
-- **6** (written): the header names an *encoding*. ``"compact"`` (the
+- **7** (written): the header names an *encoding*. ``"compact"`` (the
   default) stores the members of :func:`aniso3d.build.encoding.encode`,
   quantised and predicted from neighbouring voxels, LZMA-compressed, and the
   numbers :func:`~aniso3d.build.encoding.decode` needs (``params``, inside
   the checksum); ``"exact"`` stores the texture's arrays as they are,
   deflated.
+- **6** (read only): as 7, but the compact members store every entry's
+  in-plane centroid codes in ``bits.centroid`` bits (version 7 gives closed
+  surfaces' entries ``centroid_closed``, not in version 6's ``params``).
 - **5** (read only): as 6, without ``entry_side`` (which entries lie on
   closed surfaces, and on which side: their points are one-sided; read as
   0, every entry two-sided).
@@ -74,8 +77,8 @@ __all__ = ["ARRAYS", "ENCODINGS", "FORMAT_NAME", "FORMAT_VERSION", "TextureFile"
 
 FORMAT_NAME = "aniso3d-texture"
 #: The version written; every version from 1 up to it is read.
-FORMAT_VERSION = 6
-#: The encodings of versions 2 to 6: quantised (default) or the arrays as they are.
+FORMAT_VERSION = 7
+#: The encodings of versions 2 to 7: quantised (default) or the arrays as they are.
 ENCODINGS = ("compact", "exact")
 REBUILD = "rebuild it from its mesh ('aniso3d build MESH -o out.a3d')"
 
@@ -88,7 +91,7 @@ class TextureFile:
         arrays: every name of :data:`ARRAYS` -> its array (decoded).
         voxel_size: voxel edge h, world units.
         meta: provenance (JSON values only).
-        version: the file's format version (1 to 6).
+        version: the file's format version (1 to 7).
         encoding: "compact" or "exact" (version 1 files are "exact").
     """
 
@@ -108,7 +111,7 @@ def write_texture_file(
     bits: Bits = DEFAULT_BITS,
 ) -> Path:
     """Write ``arrays`` (every name of :data:`ARRAYS`) with the voxel size and
-    the JSON-representable part of ``meta``, atomically, as format version 6
+    the JSON-representable part of ``meta``, atomically, as format version 7
     in ``encoding`` ("compact", quantised with ``bits``, or "exact"), streamed
     into the file. The texture is encoded before the file is touched, so a
     texture that cannot be encoded leaves no file behind."""
