@@ -19,6 +19,7 @@ import aniso3d.rendering.volume as volume
 from aniso3d.build import scenes
 from aniso3d.build.encoding import Bits
 from aniso3d.build.texture import QUANTISED, AnisoTexture, build_texture
+from aniso3d.build.texture_file import FORMAT_VERSION
 from aniso3d.rendering.quick import framing_camera
 from aniso3d.rendering.renderer import Renderer
 
@@ -34,9 +35,9 @@ def sphere():
 def test_compact_textures_say_they_are_quantised(sphere, tmp_path):
     _, tex = sphere
     assert not tex.meta.get(QUANTISED)
-    assert tex.as_stored().meta[QUANTISED] == 6
+    assert tex.as_stored().meta[QUANTISED] == FORMAT_VERSION == 7
     tex.save(tmp_path / "a.a3d")
-    assert AnisoTexture.load(tmp_path / "a.a3d").meta[QUANTISED] == 6
+    assert AnisoTexture.load(tmp_path / "a.a3d").meta[QUANTISED] == 7
     tex.save(tmp_path / "b.a3d", encoding="exact")
     assert not AnisoTexture.load(tmp_path / "b.a3d").meta.get(QUANTISED)
 
