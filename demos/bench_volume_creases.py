@@ -6,7 +6,11 @@ more, its line cutting it in the runs smaller); off, ``SHEET_CREASE`` 0:
 every such face a surface sheet in the runs, counted over its whole section.
 ``--rule thick``: a thick solid's back hidden whole (``thick_backs``); off,
 ``THICK_OPPOSITE`` -inf: every closed back kept at ``1 - BACK_HIDE``, as a
-thin solid's.
+thin solid's. ``--rule back``: a closed back in a run shows its colour only
+as far as the planar law shows it (``RUN_BACK_MIN``; a far side of hidden
+backs takes the near side's colour); off, ``RUN_BACK_MIN`` 1: every back's
+colour as its coverage (a read at compile time: the renderer drawing the
+rule off makes its programs while it is off).
 
 Per scene (corpus names, or mesh files), at the corpus bench's two cameras
 (*close*: the object filling the image; *minified*: a voxel about a pixel),
@@ -19,7 +23,7 @@ rule off in the second (each uploads the texture once, with the rule as set
 then).
 
     .venv/bin/python demos/bench_volume_creases.py [SCENE | MESH FILE ...] [--size 512]
-        [--rule crease|thick] [--md docs/coverage.md]
+        [--rule crease|thick|back] [--md docs/coverage.md]
 """
 
 from __future__ import annotations
@@ -48,7 +52,8 @@ from aniso3d.rendering.renderer import Renderer
 
 #: Per rule: the module constant, its value off, the Markdown block's name.
 RULES = {"crease": ("SHEET_CREASE", 0.0, "bench_volume_creases"),
-         "thick": ("THICK_OPPOSITE", -float("inf"), "bench_volume_thick")}  # fmt: skip
+         "thick": ("THICK_OPPOSITE", -float("inf"), "bench_volume_thick"),
+         "back": ("RUN_BACK_MIN", 1.0, "bench_volume_back_colour")}  # fmt: skip
 
 
 def edge_error(truth_a: np.ndarray, img_a: np.ndarray, crop) -> float:
@@ -98,7 +103,7 @@ def main() -> None:
         f"{args.resolution}^3, K = {args.directions}; truth {args.gt_ssaa}x{args.gt_ssaa} polygons; PSNR (dB) / "
         f"FLIP inside the object's box, as the corpus bench. Rule: {name_} {getattr(volume, name_)} "
         f"(off: {off}); SHEET_CREASE {volume.SHEET_CREASE}, HALF_PIXELS {volume.HALF_PIXELS}, BACK_HIDE "
-        f"{volume.BACK_HIDE}, THICK_STEPS {volume.THICK_STEPS}.",
+        f"{volume.BACK_HIDE}, THICK_STEPS {volume.THICK_STEPS}, RUN_BACK_MIN {volume.RUN_BACK_MIN}.",
         "",
         markdown_table(head, table),
     ]

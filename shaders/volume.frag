@@ -215,6 +215,8 @@ vec3 g_run_col;    // its sheets' shaded colours, weighted by what they count
 float g_run_w;     // ... the weights' sum
 float g_run_tw;    // ... and the weighted crossing parameter (from o)
 vec4 g_run_far;    // the far side's part of g_run_col (rgb) and g_run_w (w)
+vec2 g_run_seen;   // the far side's weights times the share of its colour
+                   // each shows (a closed back: vis, RUN_BACK_MIN), and not (x, y)
 
 // Share in [0, 1] of a pixel's footprint, offsets o in [-half_w, half_w]
 // along the sheet's normal from the centre ray, whose rays cross the sheet's
@@ -269,6 +271,9 @@ vec3 run_color() {
     if (!(b0 + b1 > 0.0)) return all_c;
     vec3 c0 = (g_run_col - g_run_far.rgb) / w0;
     vec3 c1 = g_run_far.rgb / g_run_far.w;
+    // A solid's back the planar law hides shows the near side's colour: the
+    // solid's front, which hides it (a crease turning away from the eye).
+    c1 = mix(c0, c1, g_run_seen.y > 0.0 ? g_run_seen.x / g_run_seen.y : 1.0);
     return (b0 * c0 + b1 * c1) / (b0 + b1);
 }
 
@@ -615,6 +620,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                                 g_run_edge = vec4(0.0);
                                 g_run_col = vec3(0.0);
                                 g_run_far = vec4(0.0);
+                                g_run_seen = vec2(0.0);
                                 g_run_w = 0.0;
                                 g_run_tw = 0.0;
                             }
@@ -649,7 +655,11 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                         }
                         // A halo is not hidden by the sheets before it (it
                         // lies beside them on screen, past an edge).
-                        float wc = halo ? weight : run_open * weight;
+                        float wr = halo ? weight : run_open * weight;
+                        // A closed surface's back (vis < 1) keeps its
+                        // coverage but hardly colours its side.
+                        float shown = max(vis, RUN_BACK_MIN);
+                        float wc = wr * shown;
                         // Shaded where the ray crosses the plane, by the
                         // sheet's linear model across it (sheet_slopes).
                         vec3 cr = c;
@@ -661,7 +671,10 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                         g_run_col += wc * cr;
                         g_run_w += wc;
                         g_run_tw += wc * (t0 + th);
-                        if (side == 1 && !halo) g_run_far += vec4(wc * cr, wc);
+                        if (side == 1 && !halo) {
+                            g_run_far += vec4(wc * cr, wc);
+                            g_run_seen += vec2(wc, wr);
+                        }
                     }
                 } else if (hit) {
                     // A partial sheet crossed: its fill, or a half-plane's

@@ -64,7 +64,8 @@ conventions"), with ``P(w) = |wx| + |wy| + |wz|`` and h the voxel edge:
   (:mod:`~aniso3d.rendering.sheet_edges`; the GPU grid has a margin of
   :data:`~aniso3d.rendering.sheet_edges.GRID_PAD` voxels for them), and a
   run's colour is its near side's where that covers the footprint
-  (:func:`run_color`). ``opacity="split"`` is the
+  (:func:`run_color`), and a closed surface's back keeps its coverage there
+  but not its colour (:data:`RUN_BACK_MIN`). ``opacity="split"`` is the
   candidate that keeps the chord: sheets add up linearly along the ray (T =
   ``max(0, 1 - tau_s) exp(-tau_f)``); measured, it keeps the stripes of
   "linear" on tilted planes;
@@ -270,6 +271,15 @@ SHEET_CREASE = 0.5
 #: Entry word 11's bit marking a halo of a crease sheet's half-plane
 #: (volume.frag: not drawn where the half-plane is).
 CREASE_BIT = 27
+#: A closed surface's back in a run keeps its coverage (a silhouette's far
+#: side is part of its filter) but shows as little of its colour as the
+#: planar law's ``vis`` leaves of it, and at least this share: where a run's
+#: side mixes a solid's front and back (a crease turning away from the
+#: eye), the front's colour shows, and a far side of hidden backs takes the
+#: near side's (:func:`run_color`). 1 draws the backs' colours as before
+#: (the unlit underside of a box drew a dark line along its outline;
+#: docs/coverage.md, "A solid's back in its outline").
+RUN_BACK_MIN = 1e-3
 #: A run closes when the ray has gone this far (grid units) past its last
 #: voxel: a surface cut by voxel faces, or a silhouette's near and far sides,
 #: lie in voxels a cell's diagonal apart at most along the ray.
@@ -863,11 +873,15 @@ def run_color(run: dict) -> np.ndarray:
     """(3,) the colour of a run (the NumPy ray's ``run``: per side the sums
     ``band``, ``hit``, the sheets an edge cuts ``edge`` (band 0-1, hit 2-3),
     the largest halo ``halo``, and the weighted colours ``col``/``w`` of all
-    its sheets, ``far_col``/``far_w`` of the far side's): each side's mean
-    colour (halos with the near side), the near side's weighted by its
-    coverage b0, the far side's by what it covers beyond, ``max(0, b1 - b0)``.
-    Near a silhouette the far side lies behind the near side, whose colour
-    shows where both cover the footprint. Mirrors run_color() in volume.frag."""
+    its sheets, ``far_col``/``far_w`` of the far side's, ``seen`` its
+    weights times the share the planar law shows of each and not): each
+    side's mean colour (halos with the near side), the near side's weighted
+    by its coverage b0, the far side's by what it covers beyond, ``max(0,
+    b1 - b0)``. Near a silhouette the far side lies behind the near side,
+    whose colour shows where both cover the footprint; a solid's back that
+    the planar law hides takes the near side's colour, the solid's front
+    that hides it (a crease turning away from the eye: the cube's far
+    edges drew a dark outline). Mirrors run_color() in volume.frag."""
     all_c = run["col"] / run["w"]
     w0 = run["w"] - run["far_w"]
     if not run["far_w"] > 0.0 or not w0 > 1e-6 * run["w"]:
@@ -879,6 +893,9 @@ def run_color(run: dict) -> np.ndarray:
         return all_c
     c0 = (run["col"] - run["far_col"]) / w0
     c1 = run["far_col"] / run["far_w"]
+    seen = run.get("seen", np.zeros(2))
+    s = seen[0] / seen[1] if seen[1] > 0.0 else 1.0
+    c1 = s * c1 + (1.0 - s) * c0
     return (b0 * c0 + b1 * c1) / (b0 + b1)
 
 
@@ -1023,9 +1040,11 @@ def sheet_terms(
         run = {"voxel": owner[keep], "normal": nh[keep], "nw": nw[keep], "band": band[keep],
                "hit": np.where(hit, fill * ramp[:, 0], 0.0)[keep], "counted": counted[keep],
                "weight": weight[keep], "color": run_c[keep], "t": t_hit[keep],
-               "edge": (ramp[:, 0] < 1.0)[keep], "halo": np.zeros(int(keep.sum()), dtype=bool)}  # fmt: skip
+               "edge": (ramp[:, 0] < 1.0)[keep], "halo": np.zeros(int(keep.sum()), dtype=bool),
+               "vis": vis[keep]}  # fmt: skip
         if layout is not None and halos is not None and edges == "filtered":
-            run = _with_halos(run, layout, halos, texture, w, lighting, normal, x_in, chords, pixels_v)
+            run = _with_halos(run, layout, halos, texture, w, lighting, normal, x_in, chords, pixels_v,
+                              back_hide if opacity == "planar" else 0.0)  # fmt: skip
     crossed = np.bincount(owner, ws, minlength=V)
     with np.errstate(divide="ignore", invalid="ignore"):
         t_cross = np.where(crossed > 0, np.bincount(owner, ws * t_hit, minlength=V) / crossed, 0.0)
@@ -1039,7 +1058,7 @@ def sheet_terms(
         _weighted_colors(owner, V, c, all_w, vis * area),
     )
     if run is None:
-        run = {k: np.zeros(0) for k in ("voxel", "nw", "band", "hit", "counted", "weight", "t")}
+        run = {k: np.zeros(0) for k in ("voxel", "nw", "band", "hit", "counted", "weight", "t", "vis")}
         run.update(normal=np.zeros((0, 3)), color=np.zeros((0, 3)), edge=np.zeros(0, bool), halo=np.zeros(0, bool))
         run["voxel"] = run["voxel"].astype(np.int64)
     return SheetTerms(projected, crossed, t_cross, sheet_color, cloud_color, run, back)
@@ -1085,9 +1104,11 @@ def _edge_ramps(edges_: SheetEdges, rows, halo_ids, x, nh, s_in, nw, w, foot) ->
     return out
 
 
-def _with_halos(run, layout, halos, texture, w, lighting, normal, x_in, chords, pixels) -> dict:
+def _with_halos(run, layout, halos, texture, w, lighting, normal, x_in, chords, pixels, hide: float) -> dict:
     """``run`` (the rows of :class:`SheetTerms`) with the halos ``halos``
-    (per voxel, halo indices) joined after each voxel's own sheets."""
+    (per voxel, halo indices) joined after each voxel's own sheets.
+    ``hide``: the planar law's share of closed backs hidden (a halo's
+    ``vis`` is its sheet's, :func:`back_terms`)."""
     counts = np.array([len(h) for h in halos], dtype=np.int64)
     if counts.sum() == 0:
         return run
@@ -1103,6 +1124,7 @@ def _with_halos(run, layout, halos, texture, w, lighting, normal, x_in, chords, 
     s_in = np.einsum("ek,ek->e", nh, x) - ed.halo_offset[ids]
     hit, band_all, t_hit, foot, _, _ = _crossings(s_in, nw, ch, sh.slack[src], a_s, pixels[owner], "filtered")
     ramp = _edge_ramps(ed, None, ids, x, nh, s_in, nw, w, foot)
+    vis, _ = back_terms(texture, src, owner, len(halos), w, hide, layout.thick)
     counted = np.where(hit, fill, fill * band_all) * ramp[:, 0]
     weight = np.where(hit, fill, fill * band_all) * ramp[:, 1]
     ok = (sh.share[src] >= RUN_SHARE) & (a_s > 0) & ((counted > 0.0) | (weight > 0.0))
@@ -1111,7 +1133,7 @@ def _with_halos(run, layout, halos, texture, w, lighting, normal, x_in, chords, 
     halo_run = {"voxel": owner[ok], "normal": nh[ok], "nw": nw[ok], "band": (fill * band_all * ramp[:, 0])[ok],
                 "hit": np.where(hit, fill * ramp[:, 0], 0.0)[ok], "counted": counted[ok], "weight": weight[ok],
                 "color": c[ok], "t": t_hit[ok], "edge": np.zeros(int(ok.sum()), bool),
-                "halo": np.ones(int(ok.sum()), bool)}  # fmt: skip
+                "halo": np.ones(int(ok.sum()), bool), "vis": vis[ok]}  # fmt: skip
     # Each voxel's own sheets, then its halos (as the GPU lists them).
     order = np.argsort(np.concatenate([run["voxel"], halo_run["voxel"]]), kind="stable")
     return {k: np.concatenate([run[k], halo_run[k]])[order] for k in run}
@@ -1394,7 +1416,7 @@ def trace_ray_np(
                     if run is None:
                         run = {"ref": e["normal"][0], "band": np.zeros(2), "hit": np.zeros(2),
                                "edge": np.zeros(4), "halo": 0.0, "col": np.zeros(3), "w": 0.0,
-                               "far_col": np.zeros(3), "far_w": 0.0, "tw": 0.0}  # fmt: skip
+                               "far_col": np.zeros(3), "far_w": 0.0, "seen": np.zeros(2), "tw": 0.0}  # fmt: skip
                         open_ = 1.0
                     else:
                         open_ = 1.0 - run_sheets()
@@ -1416,13 +1438,17 @@ def trace_ray_np(
                             run["edge"][2 + side] = max(run["edge"][2 + side], float(e["hit"][on].max()))
                     if e["halo"].any():
                         run["halo"] = max(run["halo"], float(e["counted"][e["halo"]].max()))
-                    wc = np.where(e["halo"], 1.0, open_) * e["weight"]
+                    # A closed surface's back keeps its coverage but hardly
+                    # colours its side (RUN_BACK_MIN).
+                    wr = np.where(e["halo"], 1.0, open_) * e["weight"]
+                    wc = wr * np.maximum(e["vis"], RUN_BACK_MIN)
                     run["col"] = run["col"] + wc @ e["color"]
                     run["w"] += float(wc.sum())
                     run["tw"] += float(wc @ (e["t"] + ti))
                     far = (other == 1) & ~e["halo"]
                     run["far_col"] = run["far_col"] + wc[far] @ e["color"][far]
                     run["far_w"] += float(wc[far].sum())
+                    run["seen"] = run["seen"] + np.array([float(wc[far].sum()), float(wr[far].sum())])
                     run["end"] = ti + chord
                 # Sheet and cloud share the facets: their coverages add.
                 a_s = min(st.crossed[k], 1.0)
@@ -1781,6 +1807,7 @@ class VolumeRenderer:
             "RUN_STEEP": RUN_STEEP,
             "RUN_GRAZE": RUN_GRAZE,
             "RUN_GAP": RUN_GAP,
+            "RUN_BACK_MIN": RUN_BACK_MIN,
             "GRID_PAD": GRID_PAD,
             "CLIP_MARGIN": CLIP_MARGIN,
             "HALF_C_RANGE": HALF_C_RANGE,
