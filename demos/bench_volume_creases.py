@@ -8,7 +8,8 @@ every such face a surface sheet in the runs, counted over its whole section.
 ``THICK_OPPOSITE`` -inf: every closed back kept at ``1 - BACK_HIDE``, as a
 thin solid's. ``--rule back``: a closed back in a run shows its colour only
 as far as the planar law shows it (``RUN_BACK_MIN``; a far side of hidden
-backs takes the near side's colour); off, ``RUN_BACK_MIN`` 1: every back's
+backs takes the near side's colour, a run of thick backs alone after
+something drawn the colour so far); off, ``RUN_BACK_MIN`` 1: every back's
 colour as its coverage (a read at compile time: the renderer drawing the
 rule off makes its programs while it is off).
 

@@ -217,6 +217,7 @@ float g_run_tw;    // ... and the weighted crossing parameter (from o)
 vec4 g_run_far;    // the far side's part of g_run_col (rgb) and g_run_w (w)
 vec2 g_run_seen;   // the far side's weights times the share of its colour
                    // each shows (a closed back: vis, RUN_BACK_MIN), and not (x, y)
+float g_run_wr;    // g_run_w's weights before that share
 
 // Share in [0, 1] of a pixel's footprint, offsets o in [-half_w, half_w]
 // along the sheet's normal from the centre ray, whose rays cross the sheet's
@@ -287,7 +288,12 @@ void close_run() {
         g_t50 = g_run_tw / g_run_w;
         g_has50 = true;
     }
-    g_color += seg * run_color();
+    // A run whose near side is a thick solid's hidden back alone follows
+    // that solid's front, drawn in part: it shows the colour seen so far.
+    float near_w = g_run_w - g_run_far.w;
+    float near_raw = g_run_wr - g_run_seen.y;
+    bool hidden = g_trans < 1.0 && near_raw > 0.0 && near_w < near_raw && near_w <= 1.5 * RUN_BACK_MIN * near_raw;
+    g_color += seg * (hidden ? g_color / (1.0 - g_trans) : run_color());
     g_trans -= seg;
 }
 
@@ -621,6 +627,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                                 g_run_col = vec3(0.0);
                                 g_run_far = vec4(0.0);
                                 g_run_seen = vec2(0.0);
+                                g_run_wr = 0.0;
                                 g_run_w = 0.0;
                                 g_run_tw = 0.0;
                             }
@@ -670,6 +677,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                         }
                         g_run_col += wc * cr;
                         g_run_w += wc;
+                        g_run_wr += wr;
                         g_run_tw += wc * (t0 + th);
                         if (side == 1 && !halo) {
                             g_run_far += vec4(wc * cr, wc);

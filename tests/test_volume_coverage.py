@@ -762,6 +762,67 @@ def test_a_solids_back_does_not_colour_its_outline(r, d, resolution, scale, tmp_
     assert err < 0.009 and err_a < 0.015, f"{err:.4f} {err_a:.4f} {dump(tmp_path, 'back_colour', ref, img)}"
 
 
+def test_a_run_of_hidden_backs_alone_shows_the_colour_so_far():
+    """hidden_run: a run whose near side holds only thick backs (each shown
+    at RUN_BACK_MIN of its weight), after something was drawn, takes the
+    colour seen so far; not with a front on its near side, not first on the
+    ray, and not with the rule off (RUN_BACK_MIN 1: nothing hidden)."""
+    from aniso3d.rendering import volume
+
+    m = volume.RUN_BACK_MIN
+    backs = {"w": 2.0 * m, "wr": 2.0, "far_w": 0.0, "seen": np.zeros(2)}
+    assert volume.hidden_run(backs, 0.4) and not volume.hidden_run(backs, 1.0)
+    # a front of weight 0.5 beside them
+    assert not volume.hidden_run({**backs, "w": 0.5 + 2.0 * m, "wr": 2.5}, 0.4)
+    # the far side's backs do not count for the near side's
+    assert not volume.hidden_run({**backs, "w": 1.0 + 2.0 * m, "wr": 3.0, "far_w": 2.0 * m,
+                                  "seen": np.array([2.0 * m, 2.0])}, 0.4)  # fmt: skip
+    assert not volume.hidden_run({**backs, "w": 2.0}, 0.4)
+
+
+@pytest.mark.gpu
+def test_backs_shown_as_the_front_agree_with_the_twin_and_the_polygons(r, monkeypatch):
+    """The turned cube with a voxel about a pixel, where rays along its
+    edges clip the front's voxels and meet its underside's run: with the
+    rule (RUN_BACK_MIN, hidden_run) its pixels inside the outline come
+    nearer the 8 x 8 polygons' colour (mean |RGB error| over two views
+    and two resolutions: measured 0.0049 against 0.0062 with every back's
+    colour shown, RUN_BACK_MIN 1, a renderer made with it), and 20 of the
+    pixels the rule changes agree with march_ray_np within 1/255."""
+    from scipy.ndimage import binary_erosion
+
+    from aniso3d.rendering import volume
+    from aniso3d.rendering.renderer import Renderer
+
+    cube = turned_cube()
+    errs = {"on": [], "off": []}
+    changed = []
+    for d in [(0.5, 0.47, 0.87), (-0.29, 0.57, 0.77)]:
+        for resolution, scale in ((64, 1.0), (32, 2.0)):
+            cam = Camera.frame(cube.bounds, d, fov=30.0, distance_scale=scale)
+            ref = truth(r, cube, cam, ssaa=8)
+            inner = binary_erosion(ref[..., 3] > 0.999, iterations=1)
+            tex = aniso3d.build_texture(cube, resolution, 16)
+            on, _ = render_float(r, tex, cam)
+            monkeypatch.setattr(volume, "RUN_BACK_MIN", 1.0)
+            with Renderer(SIZE) as before:
+                off, _ = render_float(before, tex, cam)
+            monkeypatch.undo()
+            for key, img in (("on", on), ("off", off)):
+                errs[key].append(float(np.abs(img[..., :3] - ref[..., :3]).mean(axis=-1)[inner].mean()))
+            diff = np.argwhere(np.abs(on - off).max(axis=-1) > 2 / 255)
+            changed += [(tex, cam, on, y, x) for y, x in diff]
+    assert np.mean(errs["on"]) < 0.0055 < np.mean(errs["off"]), errs
+    assert len(changed) > 40
+    rng = np.random.default_rng(3)
+    for i in rng.choice(len(changed), 20, replace=False):
+        tex, cam, img, y, x = changed[i]
+        dirs, t0, t1 = pixel_rays(cam, SIZE, tex.bounds)
+        rgb, alpha = march_ray_np(tex, cam.position, dirs[y, x], r.lighting, (t0[y, x], t1[y, x]),
+                                  pixel_angle=pixel_angle(cam, SIZE))  # fmt: skip
+        assert np.abs(rgb - img[y, x, :3]).max() < 1 / 255 and abs(alpha - img[y, x, 3]) < 1 / 255, (y, x)
+
+
 @pytest.mark.gpu
 @pytest.mark.parametrize("resolution", [24, 48])
 def test_a_thick_solids_back_is_hidden_whole(r, resolution, tmp_path):

@@ -276,7 +276,9 @@ CREASE_BIT = 27
 #: planar law's ``vis`` leaves of it, and at least this share: where a run's
 #: side mixes a solid's front and back (a crease turning away from the
 #: eye), the front's colour shows, and a far side of hidden backs takes the
-#: near side's (:func:`run_color`). 1 draws the backs' colours as before
+#: near side's (:func:`run_color`); a run whose near side holds thick
+#: backs alone, after something was drawn, shows the colour seen so far
+#: (:func:`hidden_run`). 1 draws the backs' colours as before
 #: (the unlit underside of a box drew a dark line along its outline;
 #: docs/coverage.md, "A solid's back in its outline").
 RUN_BACK_MIN = 1e-3
@@ -899,6 +901,19 @@ def run_color(run: dict) -> np.ndarray:
     return (b0 * c0 + b1 * c1) / (b0 + b1)
 
 
+def hidden_run(run: dict, trans: float) -> bool:
+    """Whether a run closing at transmittance ``trans`` shows the colour
+    the ray has so far instead of its own (:func:`run_color`): its near side
+    holds nothing but thick solids' backs, which the planar law hides
+    (their colour shown at ``RUN_BACK_MIN`` of their weight), behind
+    something already drawn: that solid's front, drawn in part (a ray along
+    a CAD part's edge met the front's voxels at their corners and the
+    underside's run filled the rest in its own colour). Mirrors close_run()
+    in volume.frag."""
+    near_w, near_raw = run["w"] - run["far_w"], run["wr"] - run["seen"][1]
+    return trans < 1.0 and near_raw > 0.0 and near_w < near_raw and near_w <= 1.5 * RUN_BACK_MIN * near_raw
+
+
 def sheet_terms(
     texture: AnisoTexture,
     w: np.ndarray,
@@ -1374,7 +1389,7 @@ def trace_ray_np(
                 seg = T * cov
                 if out.t50 is None and T > 0.5 and T - seg <= 0.5:
                     out.t50 = run["tw"] / run["w"] * h
-                C = C + seg * run_color(run)
+                C = C + seg * (C / (1.0 - T) if hidden_run(run, T) else run_color(run))
                 T -= seg
         run = None
 
@@ -1416,7 +1431,8 @@ def trace_ray_np(
                     if run is None:
                         run = {"ref": e["normal"][0], "band": np.zeros(2), "hit": np.zeros(2),
                                "edge": np.zeros(4), "halo": 0.0, "col": np.zeros(3), "w": 0.0,
-                               "far_col": np.zeros(3), "far_w": 0.0, "seen": np.zeros(2), "tw": 0.0}  # fmt: skip
+                               "far_col": np.zeros(3), "far_w": 0.0, "seen": np.zeros(2), "wr": 0.0,
+                               "tw": 0.0}  # fmt: skip
                         open_ = 1.0
                     else:
                         open_ = 1.0 - run_sheets()
@@ -1444,6 +1460,7 @@ def trace_ray_np(
                     wc = wr * np.maximum(e["vis"], RUN_BACK_MIN)
                     run["col"] = run["col"] + wc @ e["color"]
                     run["w"] += float(wc.sum())
+                    run["wr"] += float(wr.sum())
                     run["tw"] += float(wc @ (e["t"] + ti))
                     far = (other == 1) & ~e["halo"]
                     run["far_col"] = run["far_col"] + wc[far] @ e["color"][far]
