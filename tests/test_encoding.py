@@ -628,19 +628,28 @@ def test_a_coarse_residual_is_never_worse_than_none(tree_tex, bits):
     assert np.any(np.abs(got - d) < np.abs(f - d) - 1e-9)  # and it does store something
 
 
+def old_fixture(version: int):
+    """The compact file ``tests/data/small_tree_v{version}.a3d`` written by
+    that version's writer, and ``..._decoded.a3d`` (exact encoding), what
+    that writer's decoder gave for it: today's decoder must give exactly
+    those arrays. Returns both :class:`TextureFile`s."""
+    f = read_texture_file(DATA / f"small_tree_v{version}.a3d")
+    assert f.version == version and f.encoding == "compact"
+    ref = read_texture_file(DATA / f"small_tree_v{version}_decoded.a3d")
+    assert ref.version == version and ref.encoding == "exact"
+    for name in ARRAYS:
+        a, b = f.arrays[name], ref.arrays[name]
+        assert a.dtype == b.dtype and a.shape == b.shape, name
+        np.testing.assert_array_equal(a, b, err_msg=name)
+    return f, ref
+
+
 def test_version_2_compact_file_still_loads():
     """tests/data/small_tree_v2.a3d was written by the version 2 compact
     writer (deflated quantised members), and small_tree_v2_decoded.a3d (exact
     encoding) holds what that writer's decoder gave for it: a later format
     must still decode the old file to exactly those arrays."""
-    f = read_texture_file(DATA / "small_tree_v2.a3d")
-    assert f.version == 2 and f.encoding == "compact"
-    ref = read_texture_file(DATA / "small_tree_v2_decoded.a3d")
-    assert ref.version == 2 and ref.encoding == "exact"
-    for name in ARRAYS:
-        a, b = f.arrays[name], ref.arrays[name]
-        assert a.dtype == b.dtype and a.shape == b.shape, name
-        np.testing.assert_array_equal(a, b, err_msg=name)
+    old_fixture(2)
     back = AnisoTexture.load(DATA / "small_tree_v2.a3d")
     assert back.meta[QUANTISED] == 2 and back.meta["source"] == "v2-fixture"
     built = build_texture(scenes.tree(levels=3, leaves_per_twig=12), 10, 16)
@@ -780,17 +789,10 @@ def test_version_4_compact_file_still_loads():
     direction and depth at the field's bits, no shift tables), and
     small_tree_v4_decoded.a3d (exact encoding) holds what that writer's
     decoder gave for it: version 5's decoder must give exactly those arrays."""
-    f = read_texture_file(DATA / "small_tree_v4.a3d")
-    assert f.version == 4 and f.encoding == "compact"
+    _, ref = old_fixture(4)
     with zipfile.ZipFile(DATA / "small_tree_v4.a3d") as zf:
         params = json.loads(zf.read("header.json"))["params"]
     assert "normal_shifts" not in params and "depth_shifts" not in params
-    ref = read_texture_file(DATA / "small_tree_v4_decoded.a3d")
-    assert ref.version == 4 and ref.encoding == "exact"
-    for name in ARRAYS:
-        a, b = f.arrays[name], ref.arrays[name]
-        assert a.dtype == b.dtype and a.shape == b.shape, name
-        np.testing.assert_array_equal(a, b, err_msg=name)
     back = AnisoTexture.load(DATA / "small_tree_v4.a3d")
     assert back.meta[QUANTISED] == 4 and back.meta["source"] == "v4-fixture"
     # and today's encoding of the same texture has version 5's shifts
@@ -921,16 +923,9 @@ def test_version_5_compact_file_still_loads():
     writer's decoder gave for it: version 6's decoder gives exactly those
     arrays, and every entry two-sided (version 5 kept no sides), where a build
     of the same mesh makes the cube's points one-sided."""
-    f = read_texture_file(DATA / "small_tree_v5.a3d")
-    assert f.version == 5 and f.encoding == "compact"
+    old_fixture(5)
     with zipfile.ZipFile(DATA / "small_tree_v5.a3d") as zf:
         assert "entry_side.npy" not in zf.namelist()
-    ref = read_texture_file(DATA / "small_tree_v5_decoded.a3d")
-    assert ref.version == 5 and ref.encoding == "exact"
-    for name in ARRAYS:
-        a, b = f.arrays[name], ref.arrays[name]
-        assert a.dtype == b.dtype and a.shape == b.shape, name
-        np.testing.assert_array_equal(a, b, err_msg=name)
     back = AnisoTexture.load(DATA / "small_tree_v5.a3d")
     assert back.meta[QUANTISED] == 5 and back.meta["source"] == "v5-fixture"
     assert not back.entry_side.any() and back.to_points().one_sided is None
@@ -957,16 +952,9 @@ def test_version_6_compact_file_still_loads():
     code in 6 bits), and small_tree_v6_decoded.a3d (exact encoding) holds
     what that writer's decoder gave for it: today's decoder gives exactly
     those arrays, though today's files give the cube's entries 7 bits."""
-    f = read_texture_file(DATA / "small_tree_v6.a3d")
-    assert f.version == 6 and f.encoding == "compact"
+    f, ref = old_fixture(6)
     with zipfile.ZipFile(DATA / "small_tree_v6.a3d") as zf:
         assert "centroid_closed" not in json.loads(zf.read("header.json"))["params"]["bits"]
-    ref = read_texture_file(DATA / "small_tree_v6_decoded.a3d")
-    assert ref.version == 6 and ref.encoding == "exact"
-    for name in ARRAYS:
-        a, b = f.arrays[name], ref.arrays[name]
-        assert a.dtype == b.dtype and a.shape == b.shape, name
-        np.testing.assert_array_equal(a, b, err_msg=name)
     back = AnisoTexture.load(DATA / "small_tree_v6.a3d")
     assert back.meta[QUANTISED] == 6 and back.meta["source"] == "v6-fixture"
     assert (back.entry_side != 0).sum() > 20
