@@ -365,9 +365,9 @@ def test_tree_through_a_file_is_within_every_bound(tree_tex, tree_file):
 
 @pytest.mark.parametrize("bits", [Bits(), Bits(area=8, normal=10, centroid=6, kd=6, density=4),
                                   Bits(area=2, normal=2, coherence=1, centroid=2, depth=2, kd=1, ks=1,
-                                       shininess=1, density=1),
+                                       shininess=1, density=1, centroid_closed=2),
                                   Bits(area=16, normal=16, coherence=16, centroid=16, kd=16, ks=16,
-                                       shininess=16, density=16)])  # fmt: skip
+                                       shininess=16, density=16, centroid_closed=16)])  # fmt: skip
 def test_bounds_hold_at_other_bits(tree_tex, bits):
     assert_within_bounds(tree_tex, tree_tex.as_stored(bits), bits)
 
