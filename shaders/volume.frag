@@ -215,9 +215,9 @@ vec3 g_run_col;    // its sheets' shaded colours, weighted by what they count
 float g_run_w;     // ... the weights' sum
 float g_run_tw;    // ... and the weighted crossing parameter (from o)
 vec4 g_run_far;    // the far side's part of g_run_col (rgb) and g_run_w (w)
-vec2 g_run_seen;   // the far side's weights times the share of its colour
-                   // each shows (a closed back: vis, RUN_BACK_MIN), and not (x, y)
-float g_run_wr;    // g_run_w's weights before that share
+float g_run_wr;    // g_run_w's weights before the share of its colour each
+                   // sheet shows (a closed back: vis, at least RUN_BACK_MIN)
+float g_run_far_raw;  // ... the far side's (g_run_far.w: after it)
 
 // Share in [0, 1] of a pixel's footprint, offsets o in [-half_w, half_w]
 // along the sheet's normal from the centre ray, whose rays cross the sheet's
@@ -274,7 +274,7 @@ vec3 run_color() {
     vec3 c1 = g_run_far.rgb / g_run_far.w;
     // A solid's back the planar law hides shows the near side's colour: the
     // solid's front, which hides it (a crease turning away from the eye).
-    c1 = mix(c0, c1, g_run_seen.y > 0.0 ? g_run_seen.x / g_run_seen.y : 1.0);
+    c1 = mix(c0, c1, g_run_far_raw > 0.0 ? g_run_far.w / g_run_far_raw : 1.0);
     return (b0 * c0 + b1 * c1) / (b0 + b1);
 }
 
@@ -291,7 +291,7 @@ void close_run() {
     // A run whose near side is a thick solid's hidden back alone follows
     // that solid's front, drawn in part: it shows the colour seen so far.
     float near_w = g_run_w - g_run_far.w;
-    float near_raw = g_run_wr - g_run_seen.y;
+    float near_raw = g_run_wr - g_run_far_raw;
     bool hidden = g_trans < 1.0 && near_raw > 0.0 && near_w < near_raw && near_w <= 1.5 * RUN_BACK_MIN * near_raw;
     g_color += seg * (hidden ? g_color / (1.0 - g_trans) : run_color());
     g_trans -= seg;
@@ -626,7 +626,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                                 g_run_edge = vec4(0.0);
                                 g_run_col = vec3(0.0);
                                 g_run_far = vec4(0.0);
-                                g_run_seen = vec2(0.0);
+                                g_run_far_raw = 0.0;
                                 g_run_wr = 0.0;
                                 g_run_w = 0.0;
                                 g_run_tw = 0.0;
@@ -681,7 +681,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                         g_run_tw += wc * (t0 + th);
                         if (side == 1 && !halo) {
                             g_run_far += vec4(wc * cr, wc);
-                            g_run_seen += vec2(wc, wr);
+                            g_run_far_raw += wr;
                         }
                     }
                 } else if (hit) {

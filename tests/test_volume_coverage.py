@@ -233,16 +233,20 @@ def test_run_colour_shows_the_far_side_only_beyond_the_near_side():
 
 
 def test_run_colour_gives_a_hidden_back_the_fronts_colour():
-    """A far side made of a solid's backs that the planar law hides (its
-    weights ``seen`` as 0 of 1) shows the near side's colour where it covers
-    beyond it (a box's edge turning away from the eye: the solid's front
-    hides its back); seen in part, the far side's own colour in that part;
-    seen whole (open surfaces), as before."""
+    """A far side made of a thick solid's backs, which the planar law hides
+    (their colour weights ``far_w`` RUN_BACK_MIN of their weights before,
+    ``far_wr``), shows the near side's colour where it covers beyond it but
+    for that share (a box's edge turning away from the eye: the solid's
+    front hides its back); a thin one's (a quarter shown), the far side's
+    own colour in that quarter; shown whole (open surfaces), as before."""
+    from aniso3d.rendering.volume import RUN_BACK_MIN
+
     run = {"band": np.array([0.4, 0.7]), "hit": np.zeros(2), "edge": np.zeros(4), "halo": 0.0,
            "col": np.array([2.0, 2.0, 2.0]), "w": 3.0, "far_col": np.zeros(3), "far_w": 1.0}  # fmt: skip
-    np.testing.assert_allclose(run_color({**run, "seen": np.array([0.0, 0.8])}), [1.0] * 3)
-    np.testing.assert_allclose(run_color({**run, "seen": np.array([0.2, 0.8])}), [(0.4 + 0.3 * 0.75) / 0.7] * 3)
-    np.testing.assert_allclose(run_color({**run, "seen": np.array([0.8, 0.8])}), [0.4 / 0.7] * 3)
+    np.testing.assert_allclose(run_color({**run, "far_wr": 1.0 / RUN_BACK_MIN}),
+                               [(0.4 + 0.3 * (1.0 - RUN_BACK_MIN)) / 0.7] * 3)  # fmt: skip
+    np.testing.assert_allclose(run_color({**run, "far_wr": 4.0}), [(0.4 + 0.3 * 0.75) / 0.7] * 3)
+    np.testing.assert_allclose(run_color({**run, "far_wr": 1.0}), [0.4 / 0.7] * 3)
 
 
 def test_run_coverage_rules():
@@ -770,13 +774,12 @@ def test_a_run_of_hidden_backs_alone_shows_the_colour_so_far():
     from aniso3d.rendering import volume
 
     m = volume.RUN_BACK_MIN
-    backs = {"w": 2.0 * m, "wr": 2.0, "far_w": 0.0, "seen": np.zeros(2)}
+    backs = {"w": 2.0 * m, "wr": 2.0, "far_w": 0.0, "far_wr": 0.0}
     assert volume.hidden_run(backs, 0.4) and not volume.hidden_run(backs, 1.0)
     # a front of weight 0.5 beside them
     assert not volume.hidden_run({**backs, "w": 0.5 + 2.0 * m, "wr": 2.5}, 0.4)
     # the far side's backs do not count for the near side's
-    assert not volume.hidden_run({**backs, "w": 1.0 + 2.0 * m, "wr": 3.0, "far_w": 2.0 * m,
-                                  "seen": np.array([2.0 * m, 2.0])}, 0.4)  # fmt: skip
+    assert not volume.hidden_run({**backs, "w": 1.0 + 2.0 * m, "wr": 3.0, "far_w": 2.0 * m, "far_wr": 2.0}, 0.4)
     assert not volume.hidden_run({**backs, "w": 2.0}, 0.4)
 
 

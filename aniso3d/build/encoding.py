@@ -1374,7 +1374,8 @@ def decode(members: dict[str, np.ndarray], params: dict, voxel_size: float, vers
         if version >= 5:
             dshift = np.asarray(dtable, dtype=np.int64)[coherence[0][take]]
             depth_bits = bits.depth - dshift
-        pbits = plane_bits(side, bits) if version >= 7 else None
+        # (before version 7, bits.centroid_closed is bits.centroid: one count for all)
+        pbits = plane_bits(side, bits)
         centroid = _decode_centroid_frame(centroid_codes, origin, float(voxel_size), coords.astype(np.int64), voxel,
                                           unit[take], tb, src, bits, depth_bits, layout, pbits)  # fmt: skip
     else:

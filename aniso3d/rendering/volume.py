@@ -875,8 +875,8 @@ def run_color(run: dict) -> np.ndarray:
     """(3,) the colour of a run (the NumPy ray's ``run``: per side the sums
     ``band``, ``hit``, the sheets an edge cuts ``edge`` (band 0-1, hit 2-3),
     the largest halo ``halo``, and the weighted colours ``col``/``w`` of all
-    its sheets, ``far_col``/``far_w`` of the far side's, ``seen`` its
-    weights times the share the planar law shows of each and not): each
+    its sheets, ``far_col``/``far_w`` of the far side's, ``far_wr`` its
+    weights before the share of its colour each shows): each
     side's mean colour (halos with the near side), the near side's weighted
     by its coverage b0, the far side's by what it covers beyond, ``max(0,
     b1 - b0)``. Near a silhouette the far side lies behind the near side,
@@ -895,8 +895,8 @@ def run_color(run: dict) -> np.ndarray:
         return all_c
     c0 = (run["col"] - run["far_col"]) / w0
     c1 = run["far_col"] / run["far_w"]
-    seen = run.get("seen", np.zeros(2))
-    s = seen[0] / seen[1] if seen[1] > 0.0 else 1.0
+    far_wr = run.get("far_wr", 0.0)
+    s = run["far_w"] / far_wr if far_wr > 0.0 else 1.0
     c1 = s * c1 + (1.0 - s) * c0
     return (b0 * c0 + b1 * c1) / (b0 + b1)
 
@@ -910,7 +910,7 @@ def hidden_run(run: dict, trans: float) -> bool:
     a CAD part's edge met the front's voxels at their corners and the
     underside's run filled the rest in its own colour). Mirrors close_run()
     in volume.frag."""
-    near_w, near_raw = run["w"] - run["far_w"], run["wr"] - run["seen"][1]
+    near_w, near_raw = run["w"] - run["far_w"], run["wr"] - run["far_wr"]
     return trans < 1.0 and near_raw > 0.0 and near_w < near_raw and near_w <= 1.5 * RUN_BACK_MIN * near_raw
 
 
@@ -1431,7 +1431,7 @@ def trace_ray_np(
                     if run is None:
                         run = {"ref": e["normal"][0], "band": np.zeros(2), "hit": np.zeros(2),
                                "edge": np.zeros(4), "halo": 0.0, "col": np.zeros(3), "w": 0.0,
-                               "far_col": np.zeros(3), "far_w": 0.0, "seen": np.zeros(2), "wr": 0.0,
+                               "far_col": np.zeros(3), "far_w": 0.0, "far_wr": 0.0, "wr": 0.0,
                                "tw": 0.0}  # fmt: skip
                         open_ = 1.0
                     else:
@@ -1465,7 +1465,7 @@ def trace_ray_np(
                     far = (other == 1) & ~e["halo"]
                     run["far_col"] = run["far_col"] + wc[far] @ e["color"][far]
                     run["far_w"] += float(wc[far].sum())
-                    run["seen"] = run["seen"] + np.array([float(wc[far].sum()), float(wr[far].sum())])
+                    run["far_wr"] += float(wr[far].sum())
                     run["end"] = ti + chord
                 # Sheet and cloud share the facets: their coverages add.
                 a_s = min(st.crossed[k], 1.0)
