@@ -11,7 +11,10 @@ as far as the planar law shows it (``RUN_BACK_MIN``; a far side of hidden
 backs takes the near side's colour, a run of thick backs alone after
 something drawn the colour so far); off, ``RUN_BACK_MIN`` 1: every back's
 colour as its coverage (a read at compile time: the renderer drawing the
-rule off makes its programs while it is off).
+rule off makes its programs while it is off). ``--rule lines``: strips
+drawn from ``STRIP_PIXELS`` 0.75 with their line halos
+(render/sheet_line_halos.py); off, ``LINE_HALOS`` False and strips from
+1.5 pixels, as before the halos.
 
 Per scene (corpus names, or mesh files), at the corpus bench's two cameras
 (*close*: the object filling the image; *minified*: a voxel about a pixel),
@@ -24,7 +27,7 @@ rule off in the second (each uploads the texture once, with the rule as set
 then).
 
     .venv/bin/python demos/bench_volume_creases.py [SCENE | MESH FILE ...] [--size 512]
-        [--rule crease|thick|back] [--md docs/coverage.md]
+        [--rule crease|thick|back|lines] [--md docs/coverage.md]
 """
 
 from __future__ import annotations
@@ -51,10 +54,11 @@ from aniso3d.build.texture import build_texture
 from aniso3d.rendering import volume
 from aniso3d.rendering.renderer import Renderer
 
-#: Per rule: the module constant, its value off, the Markdown block's name.
-RULES = {"crease": ("SHEET_CREASE", 0.0, "bench_volume_creases"),
-         "thick": ("THICK_OPPOSITE", -float("inf"), "bench_volume_thick"),
-         "back": ("RUN_BACK_MIN", 1.0, "bench_volume_back_colour")}  # fmt: skip
+#: Per rule: the module constants and their values off, the Markdown block's name.
+RULES = {"crease": ({"SHEET_CREASE": 0.0}, "bench_volume_creases"),
+         "thick": ({"THICK_OPPOSITE": -float("inf")}, "bench_volume_thick"),
+         "back": ({"RUN_BACK_MIN": 1.0}, "bench_volume_back_colour"),
+         "lines": ({"LINE_HALOS": False, "STRIP_PIXELS": 1.5}, "bench_volume_line_halos")}  # fmt: skip
 
 
 def edge_error(truth_a: np.ndarray, img_a: np.ndarray, crop) -> float:
@@ -69,17 +73,19 @@ def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
     mesh = load_mesh(name) if Path(name).suffix else scenes.get_scene(name)
     label = Path(name).name if Path(name).suffix else name
     tex = build_texture(mesh, args.resolution, args.directions)
-    name_, off, _ = RULES[args.rule]
-    rule = getattr(volume, name_)
+    off, _ = RULES[args.rule]
+    rule = {k: getattr(volume, k) for k in off}
     rows = []
     with Renderer((args.size, args.size)) as before:
         for spec, truth, row in scene_cameras(renderer, mesh, label, args):
             truth_a = renderer.render(mesh, spec.camera, "mesh", ssaa=args.gt_ssaa, alpha=True)[..., 3]
-            setattr(volume, name_, off)
+            for k, v in off.items():
+                setattr(volume, k, v)
             try:
                 old = before.render(tex, spec.camera, "volume", alpha=True)
             finally:
-                setattr(volume, name_, rule)
+                for k, v in rule.items():
+                    setattr(volume, k, v)
             new = renderer.render(tex, spec.camera, "volume", alpha=True)
             for key, img in (("off", old), ("on", new)):
                 row[key] = scored(truth, img[..., :3], spec)
@@ -93,7 +99,7 @@ def main() -> None:
     ap = corpus_parser(__doc__.splitlines()[0], scenes.CORPUS)
     ap.add_argument("--rule", choices=sorted(RULES), default="crease")
     args = ap.parse_args()
-    name_, off, block = RULES[args.rule]
+    off, block = RULES[args.rule]
     run = run_corpus_demo(args, run_scene)
     head = ["scene", "camera", "1 spp", "2x2", "volume, rule off", "volume, rule on", "Δ PSNR", "Δ FLIP",
             "edge err off", "edge err on"]  # fmt: skip
@@ -102,8 +108,10 @@ def main() -> None:
     parts = [
         f"{run.header(command('demos/bench_volume_creases.py', args, '--rule', args.rule))} Texture "
         f"{args.resolution}^3, K = {args.directions}; truth {args.gt_ssaa}x{args.gt_ssaa} polygons; PSNR (dB) / "
-        f"FLIP inside the object's box, as the corpus bench. Rule: {name_} {getattr(volume, name_)} "
-        f"(off: {off}); SHEET_CREASE {volume.SHEET_CREASE}, HALF_PIXELS {volume.HALF_PIXELS}, BACK_HIDE "
+        f"FLIP inside the object's box, as the corpus bench. Rule: "
+        f"{', '.join(f'{k} {getattr(volume, k)}' for k in off)} "
+        f"(off: {', '.join(f'{k} {v}' for k, v in off.items())}); "
+        f"SHEET_CREASE {volume.SHEET_CREASE}, HALF_PIXELS {volume.HALF_PIXELS}, BACK_HIDE "
         f"{volume.BACK_HIDE}, THICK_STEPS {volume.THICK_STEPS}, RUN_BACK_MIN {volume.RUN_BACK_MIN}.",
         "",
         markdown_table(head, table),

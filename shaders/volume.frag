@@ -73,7 +73,9 @@ vec3 g_light_dir[4];
 // infinite ray parameter), RUN_SHARE, RUN_GAP, RUN_PARALLEL, RUN_STEEP and RUN_GRAZE
 // (the runs of surface sheets: render/volume.py:sheet_terms), HALF_C_RANGE
 // and HALF_PIXELS (half-planes: render/sheet_halfplanes.py), STRIP_PIXELS
-// (strips: render/sheet_strips.py).
+// (strips: render/sheet_strips.py), CREASE_BIT and FACE_CUT_BIT (entry word
+// 11's flags of a crease sheet's halo and of a line halo cut by its face:
+// render/sheet_line_halos.py).
 
 uniform vec2 u_size;
 uniform vec3 u_forward;
@@ -546,7 +548,8 @@ void composite(int v, vec3 x_in, float t0, float chord) {
             if (halo && !(u_opacity_mode == 3 && foot > 0.0)) continue;
             // A crease sheet drawn as its half-plane carries no halo (its
             // halos' bit CREASE_BIT).
-            if (halo && ((sh.w >> CREASE_BIT) & 1u) == 1u && pixels >= HALF_PIXELS) continue;
+            // (A line halo's word 11 holds its line's offset there, bit 31 set.)
+            if (halo && (sh.w >> 31u) == 0u && ((sh.w >> CREASE_BIT) & 1u) == 1u && pixels >= HALF_PIXELS) continue;
             vec2 fill_share = unpackHalf2x16(sh.y);
             // A half-plane (render/sheet_halfplanes.py): a surface sheet
             // with an edge inside the voxel, where the footprint is filtered
@@ -559,6 +562,10 @@ void composite(int v, vec3 x_in, float t0, float chord) {
             bool strip = (sh.w >> 31u) == 1u && (sh.w & 8u) != 0u && !crease_line;
             bool hp = (sh.w >> 31u) == 1u && u_opacity_mode == 3 && foot > 0.0
                       && pixels >= (strip ? STRIP_PIXELS : HALF_PIXELS);
+            // A line halo (render/sheet_line_halos.py): a half-plane's or a
+            // strip's lines carried into the voxel beside it, drawn with them.
+            bool line_halo = halo && (sh.w >> 31u) == 1u;
+            if (line_halo && !hp) continue;
             float share = hp ? 1.0 : 1.0 - (1.0 - fill_share.y) * (1.0 - zoom);
             // A surface sheet counts in runs, but a crease sheet drawn as its
             // half-plane (render/volume.py:SHEET_CREASE). (A surface sheet
@@ -695,6 +702,10 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                                                   uintBitsToFloat(sh.x), foot * STRIP_FOOT)
                                     : halfplane_ramp(crease_line ? ENT(4u * e + 3u).x : sh.w, p, nh, nw,
                                                      uintBitsToFloat(sh.x), foot);
+                        // ... a line halo whose line crosses its face also
+                        // cut by the face, as a sheet's halo past an edge.
+                        if (line_halo && ((sh.w >> FACE_CUT_BIT) & 1u) == 1u)
+                            ws *= edge_ramp(halo_face, p, nh, nw, foot, -1.0);
                     }
                     t_cross += ws * th;
                 }

@@ -58,12 +58,15 @@ STRIP_PERPENDICULAR = 0.3
 #: STRIP_AREA_ERROR of theirs (h^2).
 STRIP_TOLERANCE = 0.03
 STRIP_AREA_ERROR = 0.01
-#: Strips are drawn where their voxel spans at least this many pixels:
-#: smaller, the footprint reaches past the voxel, where nothing carries the
-#: strip on (the corpus lattice with a voxel a pixel kept 0.93 of its alpha
-#: and its FLIP rose 0.0685 to 0.0763), and the sheet laws' partial sheets
-#: and clouds filter better. (Open surfaces' half-planes: HALF_PIXELS.)
-STRIP_PIXELS = 1.5
+#: Strips are drawn where their voxel spans at least this many pixels.
+#: The footprint reaching past the voxel is carried on by the strips' line
+#: halos (render/sheet_line_halos.py); without them, drawn from a pixel on,
+#: the corpus lattice minified kept 0.93 of its alpha and its FLIP rose
+#: 0.0685 to 0.0763, so they were drawn from 1.5 pixels. With them, from
+#: 0.75 (docs/coverage.md, "Halos of lines inside voxels"); smaller, the
+#: partial sheets' clouds filter better. (Open surfaces' half-planes:
+#: HALF_PIXELS.)
+STRIP_PIXELS = 0.75
 #: Their ramps run over this share of the pixel's footprint (a box of the
 #: pixel's width; 0.75 gained the lattice 0.1 dB and 0.003-0.004 of FLIP at
 #: 3.3 and 1.6 pixels a voxel).

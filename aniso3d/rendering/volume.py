@@ -135,15 +135,26 @@ from aniso3d.rendering.sheet_creases import (
     crease_partners,
     partner_codes,
 )
-from aniso3d.rendering.sheet_edges import GRID_PAD, MAX_EDGES, SheetEdges, edge_factors, edge_words, sheet_edges
+from aniso3d.rendering.sheet_edges import (
+    GRID_PAD,
+    MAX_EDGES,
+    NO_FACE,
+    SheetEdges,
+    edge_factors,
+    edge_ramp,
+    edge_words,
+    sheet_edges,
+)
 from aniso3d.rendering.sheet_halfplanes import C_RANGE as HALF_C_RANGE
 from aniso3d.rendering.sheet_halfplanes import (
     HALF_PIXELS,
     SheetHalfplanes,
     halfplane_ramp,
     halfplane_words,
+    offset_code,
     sheet_halfplanes,
 )
+from aniso3d.rendering.sheet_line_halos import FACE_CUT_BIT, LineHalos, line_halos
 from aniso3d.rendering.sheet_slopes import SheetSlopes, sheet_slopes, smoothed
 from aniso3d.rendering.sheet_strips import STRIP_FOOT, STRIP_PIXELS, SheetStrips, sheet_strips, strip_cover, strip_words
 
@@ -268,6 +279,10 @@ RUN_SHARE = 0.999
 #: stays in the runs, its line cutting it as an edge on a voxel face cuts a
 #: sheet (render/sheet_creases.py).
 SHEET_CREASE = 0.5
+#: Half-planes and strips carry their footprint into the voxels beside
+#: them through line halos (render/sheet_line_halos.py), so that they can be
+#: drawn where a voxel spans about a pixel. False: none (as before them).
+LINE_HALOS = True
 #: Entry word 11's bit marking a halo of a crease sheet's half-plane
 #: (volume.frag: not drawn where the half-plane is).
 CREASE_BIT = 27
@@ -930,6 +945,7 @@ def sheet_terms(
     halos: np.ndarray | None = None,
     shading: str = "smooth",
     back_hide: float = BACK_HIDE,
+    line_halos: list | None = None,
 ) -> SheetTerms:
     """:class:`SheetTerms` of ``voxels`` (V,; -1: a cell holding halos only)
     crossed along the unit vector ``w`` from the voxel-local points ``x_in``
@@ -950,7 +966,10 @@ def sheet_terms(
     ``halos`` (V,) lists, per voxel, the halos in it (indices into the
     layout's), counted after its own entries. ``shading="smooth"`` shades the
     runs' sheets by their linear models (:data:`SHADING_MODES`).
-    ``back_hide``: "planar" only, :data:`BACK_HIDE` (:func:`back_terms`)."""
+    ``back_hide``: "planar" only, :data:`BACK_HIDE` (:func:`back_terms`).
+    ``line_halos`` (V,) lists, per voxel, the line halos in it (indices into
+    the layout's :attr:`SheetLayout.line_halos`), counted as its own
+    half-planes and strips are (:func:`_line_halo_terms`)."""
     w = np.asarray(w, dtype=np.float64)
     w = w / np.linalg.norm(w)
     voxels = np.asarray(voxels, dtype=np.int64)
@@ -1060,11 +1079,16 @@ def sheet_terms(
         if layout is not None and halos is not None and edges == "filtered":
             run = _with_halos(run, layout, halos, texture, w, lighting, normal, x_in, chords, pixels_v,
                               back_hide if opacity == "planar" else 0.0)  # fmt: skip
-    crossed = np.bincount(owner, ws, minlength=V)
+    ws_owner, ws_c, ws_t = owner, c, t_hit
+    if line_halos is not None and layout is not None and opacity == "planar" and edges == "filtered":
+        lo_, lws, lc, lt = _line_halo_terms(layout, line_halos, texture, w, lighting, normal, x_in, chords,
+                                           pixels_v, back_hide)  # fmt: skip
+        ws_owner, ws, ws_c, ws_t = (np.concatenate(x) for x in ((owner, lo_), (ws, lws), (c, lc), (t_hit, lt)))
+    crossed = np.bincount(ws_owner, ws, minlength=V)
     with np.errstate(divide="ignore", invalid="ignore"):
-        t_cross = np.where(crossed > 0, np.bincount(owner, ws * t_hit, minlength=V) / crossed, 0.0)
+        t_cross = np.where(crossed > 0, np.bincount(ws_owner, ws * ws_t, minlength=V) / crossed, 0.0)
     zero = np.zeros(len(rows))
-    sheet_color = _weighted_colors(owner, V, c, ws, zero)
+    sheet_color = _weighted_colors(ws_owner, V, ws_c, ws, np.zeros(len(ws)))
     cloud_w = vis * np.maximum(area - a_s, 0.0) * np.abs(n @ w)
     all_w = vis * area * np.abs(n @ w)
     cloud_color = np.where(
@@ -1154,6 +1178,47 @@ def _with_halos(run, layout, halos, texture, w, lighting, normal, x_in, chords, 
     return {k: np.concatenate([run[k], halo_run[k]])[order] for k in run}
 
 
+def _line_halo_terms(layout, line_halos, texture, w, lighting, normal, x_in, chords, pixels, hide: float):
+    """The line halos ``line_halos`` (per voxel, indices into the layout's)
+    as partial sheets of their voxels: (N,) each one's voxel, the share of
+    the footprint it covers where the ray crosses its plane (its entry's
+    lines, moved into the voxel, and where its line crosses its face, cut
+    by the face: :mod:`~aniso3d.rendering.sheet_line_halos`), its colour and
+    crossing parameter. Mirrors volume.frag (a line halo: drawn where its
+    entry's lines are)."""
+    counts = np.array([len(h) for h in line_halos], dtype=np.int64)
+    if counts.sum() == 0:
+        z = np.zeros(0)
+        return np.zeros(0, np.int64), z, np.zeros((0, 3)), z
+    ids = np.concatenate([np.asarray(h, dtype=np.int64) for h in line_halos])
+    owner = np.repeat(np.arange(len(line_halos)), counts)
+    lh, sh, st = layout.line_halos, layout.sheets, layout.strips
+    src = lh.row[ids]
+    strip = st.mask[src]
+    pix = np.asarray(pixels, dtype=np.float64)[owner]
+    with np.errstate(divide="ignore"):
+        drawn = (1.0 / pix > 0.0) & (pix >= np.where(strip, STRIP_PIXELS, HALF_PIXELS))
+    nh = sh.normal[src]
+    nw = nh @ w
+    x = np.asarray(x_in, np.float64)[owner]
+    s_in = np.einsum("ek,ek->e", nh, x) - lh.offset[ids]
+    vis, _ = back_terms(texture, src, owner, len(line_halos), w, hide, layout.thick)
+    a_s = vis * sh.area[src]
+    hit, _, t_hit, foot, _, _ = _crossings(s_in, nw, np.asarray(chords, np.float64)[owner], sh.slack[src], a_s,
+                                           pix, "filtered")  # fmt: skip
+    with np.errstate(divide="ignore", invalid="ignore"):
+        p = x + w[None, :] * np.where(nw != 0.0, -s_in / nw, 0.0)[:, None]
+    angle = np.where(strip, st.angle[src], layout.halfplanes.angle[src])
+    cover = strip_cover(angle, lh.lo[ids], np.where(strip, lh.hi[ids], np.inf), lh.offset[ids], p, nh, w,
+                        np.where(strip, STRIP_FOOT, 1.0) * foot)  # fmt: skip
+    cut = lh.cut[ids]
+    if cut.any():
+        cover[cut] *= edge_ramp(lh.face[ids][cut], p[cut], nh[cut], w, foot[cut], inside=False)
+    ws = np.where(drawn & hit, vis * cover, 0.0)
+    c, _ = _entry_colors(texture, w, lighting, normal, src)
+    return owner, ws, c, t_hit
+
+
 @dataclass(frozen=True)
 class SheetLayout:
     """What the NumPy ray needs of a whole texture's sheets (the GPU's
@@ -1176,6 +1241,11 @@ class SheetLayout:
     crease_phi: np.ndarray
     #: (E,) bool, the closed entries whose solid is thick behind them (:func:`thick_backs`).
     thick: np.ndarray
+    #: The lines' halos (:func:`sheet_line_halos`), their cells' keys
+    #: (sorted) and their indices in that order.
+    line_halos: LineHalos = field(default_factory=LineHalos.empty)
+    line_keys: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    line_order: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
 
 def _no_creases(halfplanes: SheetHalfplanes, sheets: EntrySheets) -> SheetHalfplanes:
@@ -1200,6 +1270,38 @@ def _sheet_halfplanes(texture: AnisoTexture, sheets: EntrySheets) -> tuple[Sheet
     return replace(hp, mask=mask), angles
 
 
+def sheet_line_halos(sheets: EntrySheets, halfplanes: SheetHalfplanes, strips: SheetStrips, texture) -> LineHalos:
+    """The :class:`~aniso3d.rendering.sheet_line_halos.LineHalos` of the
+    strips (a closed surface's half-plane among them, its far line at
+    infinity; :data:`LINE_HALOS`; none when off). An open surface's
+    half-planes have none: with them the shell's border over-covered (its
+    volume lost 0.1 dB close up and 0.3 dB with half-planes from 0.5 pixel;
+    docs/coverage.md, "Halos of lines inside voxels")."""
+    if not LINE_HALOS:
+        return LineHalos.empty()
+    rows = np.flatnonzero(strips.mask)
+    return line_halos(texture, sheets, rows, strips.angle[rows], strips.lo[rows], strips.hi[rows])
+
+
+def line_halo_entries(entries: np.ndarray, lh: LineHalos, strips: SheetStrips) -> np.ndarray:
+    """(H, ENTRY_WORDS) uint32: the line halos ``lh`` as volume.frag reads
+    them: their entries' words with no area, their planes and lines in
+    their voxels' frames, the halo's face in word 11 (bits 8-10) and
+    whether the face cuts it (bit FACE_CUT_BIT)."""
+    halo = entries[lh.row].copy()
+    halo[:, 3] = np.float32(0.0).view(np.uint32)
+    halo[:, 8] = lh.offset.astype(np.float32).view(np.uint32)
+    strip = strips.mask[lh.row]
+    no_face = np.uint32(NO_FACE | (NO_FACE << 4))
+    halo[:, 11] = (
+        (halo[:, 11] & np.uint32(0x7F808))  # the angle and the strip bit kept
+        | (offset_code(lh.lo).astype(np.uint32) << 19) | np.uint32(1 << 31) | no_face
+        | (lh.face.astype(np.uint32) << 8) | (lh.cut.astype(np.uint32) << FACE_CUT_BIT)
+    )  # fmt: skip
+    halo[:, 12] = np.where(strip, lh.hi.astype(np.float32).view(np.uint32), halo[:, 12])
+    return halo
+
+
 def sheet_layout(texture: AnisoTexture) -> SheetLayout:
     """The :class:`SheetLayout` of ``texture``."""
     sheets = entry_sheets(texture)
@@ -1211,8 +1313,11 @@ def sheet_layout(texture: AnisoTexture) -> SheetLayout:
     order = np.argsort(keys, kind="stable")
     hp, phi = _sheet_halfplanes(texture, sheets)
     st = sheet_strips(texture, sheets, sheets.surface, _no_creases(hp, sheets), closed_sign(texture))
+    lh = sheet_line_halos(sheets, hp, st, texture)
+    lkeys = cell_keys(lh.cell + GRID_PAD, pshape)
+    lorder = np.argsort(lkeys, kind="stable")
     return SheetLayout(sheets, ed, keys[order], order, SheetSlopes(half(sl.shape), half(sl.kd)), hp, st, phi,
-                       thick_backs(texture))  # fmt: skip
+                       thick_backs(texture), lh, lkeys[lorder], lorder)  # fmt: skip
 
 
 # ------------------------------------------------------------ the NumPy ray
@@ -1322,6 +1427,7 @@ def trace_ray_np(
     # (planar law only) by their cells' keys.
     keys = cell_keys(np.asarray(texture.coords, np.int64) + GRID_PAD, shape)
     hkeys = layout.halo_keys if opacity == "planar" else np.zeros(0, np.int64)
+    lkeys = layout.line_keys if opacity == "planar" and edges == "filtered" else np.zeros(0, np.int64)
 
     cell = np.clip(np.floor(o + d * t0).astype(np.int64), 0, shape - 1)
     step = np.sign(d).astype(np.int64)
@@ -1330,7 +1436,7 @@ def trace_ray_np(
         tdelta = np.where(d != 0, 1.0 / np.abs(d), _BIG)
     t = t0
     # Per cell met: texture voxel (-1: none), entry, chord, cell, its halos.
-    hits: list[tuple[int, float, float, np.ndarray, np.ndarray]] = []
+    hits: list[tuple[int, float, float, np.ndarray, np.ndarray, np.ndarray]] = []
     while t < t1:
         tx = float(tmax.min())
         te = min(tx, t1)
@@ -1340,8 +1446,10 @@ def trace_ray_np(
             v = i if i < len(keys) and keys[i] == key else -1
             lo, hi = np.searchsorted(hkeys, key), np.searchsorted(hkeys, key, side="right")
             halo_ids = layout.halo_order[lo:hi] if hi > lo else np.zeros(0, np.int64)
-            if v >= 0 or len(halo_ids):
-                hits.append((v, t, te - t, cell.copy(), halo_ids))
+            lo, hi = np.searchsorted(lkeys, key), np.searchsorted(lkeys, key, side="right")
+            line_ids = layout.line_order[lo:hi] if hi > lo else np.zeros(0, np.int64)
+            if v >= 0 or len(halo_ids) or len(line_ids):
+                hits.append((v, t, te - t, cell.copy(), halo_ids, line_ids))
             t = te
         if tx >= t1:
             break
@@ -1369,7 +1477,7 @@ def trace_ray_np(
             pixels = 1.0 / ((t_in + 0.5 * chords) * float(pixel_angle))
         st = sheet_terms(texture, d, lighting, vox, x_in, chords, opacity, normal, pixels, edges=edges,
                          layout=layout, halos=[hv[4] for hv in hits], shading=shading,
-                         back_hide=back_hide)  # fmt: skip
+                         back_hide=back_hide, line_halos=[hv[5] for hv in hits])  # fmt: skip
     C, T = np.zeros(3), 1.0
     tau_s, T_f = 0.0, 1.0  # "split": the sheets' linear depth, the cloud's transmittance
     # "planar": the open run of surface sheets (volume.frag: g_run...): per
@@ -1393,7 +1501,7 @@ def trace_ray_np(
                 T -= seg
         run = None
 
-    for k, ((v, ti, chord, _, _), D, col) in enumerate(zip(hits, dens, cols, strict=True)):
+    for k, ((v, ti, chord, _, _, _), D, col) in enumerate(zip(hits, dens, cols, strict=True)):
         if T <= T_MIN:
             break
         steep = False  # the centre ray crosses one of this voxel's surface sheets steeply
@@ -1623,12 +1731,14 @@ def pack_volume_grid(texture: AnisoTexture) -> PackedVolume:
     entries[:, 11] = np.where(strips.mask, (entries[:, 11] & 0x7F7) | near, entries[:, 11])
     entries[:, 12] = np.where(strips.mask, far, entries[:, 12])
 
+    lh = sheet_line_halos(sheets, halfplanes, strips, texture)
+
     # The GPU grid: GRID_PAD voxels of margin (halos of edges on the outer
     # planes), the texture's voxels first, then the halos' voxels it lacks.
     pshape = shape + 2 * GRID_PAD
     cells = coords + GRID_PAD
     tkeys = cell_keys(cells, pshape)
-    hkeys = cell_keys(edges.halo_cell + GRID_PAD, pshape)
+    hkeys = cell_keys(np.concatenate([edges.halo_cell, lh.cell]) + GRID_PAD, pshape)
     pos = np.minimum(np.searchsorted(tkeys, hkeys), max(M - 1, 0))
     found = (tkeys[pos] == hkeys) if M else np.zeros(len(hkeys), dtype=bool)
     new_keys = np.unique(hkeys[~found])
@@ -1644,6 +1754,7 @@ def pack_volume_grid(texture: AnisoTexture) -> PackedVolume:
         np.full((len(halo), MAX_EDGES), -1), np.stack([edges.halo_kind, none[:, 1]], 1),
         np.stack([edges.halo_angle, none[:, 1]], 1), edges.halo_face,
     ) | np.where(crease_hp[edges.halo_row], np.uint32(1 << CREASE_BIT), np.uint32(0))
+    halo = np.concatenate([halo, line_halo_entries(entries, lh, strips)])
     voxel_of = np.concatenate([texture.entry_voxel, halo_vox])
     order = np.lexsort((np.arange(len(voxel_of)), np.arange(len(voxel_of)) >= E, voxel_of))
     entries = np.concatenate([entries, halo])[order]
@@ -1830,6 +1941,7 @@ class VolumeRenderer:
             "HALF_C_RANGE": HALF_C_RANGE,
             "HALF_PIXELS": HALF_PIXELS,
             "CREASE_BIT": f"{CREASE_BIT}u",
+            "FACE_CUT_BIT": f"{FACE_CUT_BIT}u",
             "STRIP_PIXELS": STRIP_PIXELS,
             "STRIP_FOOT": STRIP_FOOT,
         }
