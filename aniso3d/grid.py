@@ -51,6 +51,29 @@ def ranges(starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
     return np.repeat(starts - first, counts) + np.arange(total, dtype=np.int64)
 
 
+def entries_at(
+    coords: np.ndarray, shape, entry_offsets: np.ndarray, cells: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The entries of the occupied voxels at ``cells`` (N, 3; outside the
+    grid or empty: none), of a sparse grid whose voxels ``coords`` (sorted
+    by :func:`cell_keys`) own the entries ``entry_offsets[v]`` to
+    ``entry_offsets[v + 1]``: two int64 arrays, each entry's cell (an index
+    into ``cells``) and the entry, cell by cell, in order."""
+    coords = np.asarray(coords, dtype=np.int64)
+    shape = np.asarray(shape, dtype=np.int64)
+    cells = np.asarray(cells, dtype=np.int64).reshape(-1, 3)
+    if len(coords) == 0 or len(cells) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    inside = np.all((cells >= 0) & (cells < shape), axis=1)
+    keys = cell_keys(coords, shape)
+    key = cell_keys(np.where(inside[:, None], cells, 0), shape)
+    pos = np.minimum(np.searchsorted(keys, key), len(keys) - 1)
+    hit = np.flatnonzero(inside & (keys[pos] == key))
+    offsets = np.asarray(entry_offsets, dtype=np.int64)
+    lo, hi = offsets[pos[hit]], offsets[pos[hit] + 1]
+    return np.repeat(hit, hi - lo), ranges(lo, hi)
+
+
 def tangent_frame(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(t, b), each (N, 3) float64: unit tangent axes of unit ``normals`` (N, 3),
     ``t = normalize(n x h)`` with ``h`` = x unless ``|n_x| >= 0.9``, then y;

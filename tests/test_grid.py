@@ -120,3 +120,28 @@ def test_weighted_means_closed_form_and_empty_groups():
     w = np.random.default_rng(4).uniform(0.1, 1.0, 1000)
     g = np.arange(1000) % 7
     np.testing.assert_allclose(weighted_means(g, w, np.full(1000, 0.3), np.bincount(g, w)), 0.3, rtol=1e-13)
+
+
+def test_entries_at_lists_each_cells_entries_against_a_loop():
+    """entries_at against a loop over the cells: occupied cells give their
+    entries in order, empty cells and cells outside the grid none."""
+    from aniso3d.grid import entries_at
+
+    rng = np.random.default_rng(5)
+    shape = np.array([5, 4, 3])
+    keys = np.sort(rng.choice(int(np.prod(shape)), 20, replace=False))
+    coords = cell_coords(keys, shape)
+    counts = rng.integers(1, 4, len(coords))
+    offsets = np.concatenate([[0], np.cumsum(counts)])
+    cells = rng.integers(-1, 6, (200, 3))
+    which, other = entries_at(coords, shape, offsets, cells)
+    want_w, want_o = [], []
+    for i, c in enumerate(cells):
+        match = np.flatnonzero((coords == c).all(axis=1))
+        if len(match):
+            v = match[0]
+            want_w += [i] * int(counts[v])
+            want_o += list(range(offsets[v], offsets[v + 1]))
+    assert len(want_w) > 20
+    np.testing.assert_array_equal(which, want_w)
+    np.testing.assert_array_equal(other, want_o)

@@ -14,7 +14,7 @@ import dataclasses
 import numpy as np
 import pytest
 from test_render_volume import pixel_angle, pixel_rays, render_float
-from test_sheet_strips import BOUNDS, beam
+from test_sheet_strips import BOUNDS, across_the_beam, beam
 
 from aniso3d.build.texture import build_texture
 from aniso3d.grid import cell_keys
@@ -102,11 +102,7 @@ def test_a_beams_alpha_across_it_with_a_voxel_a_pixel(shift):
     mesh, rot = beam(W, 0.0, 0.0)
     tex = build_texture(mesh, 32, 16, bounds=BOUNDS + shift)
     layout = sheet_layout(tex)
-    c, a, b = rot[:, 0], rot[:, 1], rot[:, 2]
-    w = np.array([0.3, -0.4, -1.0]) / np.linalg.norm([0.3, -0.4, -1.0])
-    wp = w - (w @ c) * c
-    u = np.cross(c, wp / np.linalg.norm(wp))
-    width = W * (abs(a @ u) + abs(b @ u))
+    c, w, u, width = across_the_beam(rot, W)
     ds, foot = 0.1, 1.0
     s = np.arange(-2.0, 2.0 + 1e-9, ds)
     light = Lighting()

@@ -76,6 +76,18 @@ def beam(width: float, yaw: float, pitch: float) -> tuple[Mesh, np.ndarray]:
 
 
 BOUNDS = np.array([[-16.0] * 3, [16.0] * 3])
+
+
+def across_the_beam(rot: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """For parallel rays across the beam of rotation ``rot`` and ``width``:
+    its axis c, the rays' unit direction w, the unit direction u across the
+    beam and the rays, and the beam's shadow's width along u, ``W (|a . u|
+    + |b . u|)`` (a and b its faces' normals)."""
+    c, a, b = rot[:, 0], rot[:, 1], rot[:, 2]
+    w = np.array([0.3, -0.4, -1.0]) / np.linalg.norm([0.3, -0.4, -1.0])
+    wp = w - (w @ c) * c
+    u = np.cross(c, wp / np.linalg.norm(wp))
+    return c, w, u, width * (abs(a @ u) + abs(b @ u))
 ANGLES = [(20.0, 10.0), (35.0, -25.0), (60.0, 5.0)]
 
 
@@ -174,11 +186,7 @@ def test_a_beams_alpha_across_it_is_its_shadow_filtered(yaw, pitch):
     mesh, rot = beam(W, yaw, pitch)
     tex = build_texture(mesh, 32, 16, bounds=BOUNDS)
     layout = sheet_layout(tex)
-    c, a, b = rot[:, 0], rot[:, 1], rot[:, 2]
-    w = np.array([0.3, -0.4, -1.0]) / np.linalg.norm([0.3, -0.4, -1.0])
-    wp = w - (w @ c) * c
-    u = np.cross(c, wp / np.linalg.norm(wp))
-    width = W * (abs(a @ u) + abs(b @ u))
+    c, w, u, width = across_the_beam(rot, W)
     ds, foot = 0.05, 0.25
     s = np.arange(-1.5, 1.5 + 1e-9, ds)
     want = np.clip(np.minimum(s + foot / 2, width / 2) - np.maximum(s - foot / 2, -width / 2), 0, None) / foot

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aniso3d.grid import cell_keys, tangent_frame
+from aniso3d.grid import entries_at, tangent_frame
 
 #: Entries whose facets fill between these shares of their plane's section
 #: can be half-planes (fuller: a surface sheet; emptier: too little to place).
@@ -297,7 +297,6 @@ def _continued(texture, sheets, surface: np.ndarray, angle: np.ndarray, rows: np
     n = sheets.normal[rows]
     t1, t2 = tangent_frame(n)
     u = np.cos(angle[rows])[:, None] * t1 + np.sin(angle[rows])[:, None] * t2
-    shape = np.asarray(texture.shape, dtype=np.int64)
     coords = np.asarray(texture.coords, dtype=np.int64)
     owner = np.asarray(texture.entry_voxel, dtype=np.int64)
     local = texture.local_centroids(rows)
@@ -305,17 +304,7 @@ def _continued(texture, sheets, surface: np.ndarray, angle: np.ndarray, rows: np
     step = np.floor(q).astype(np.int64)
     cell = coords[owner[rows]] + step
     q -= step
-    inside = np.all((cell >= 0) & (cell < shape), axis=1)
-    keys = cell_keys(coords, shape)
-    key = cell_keys(np.where(inside[:, None], cell, 0), shape)
-    pos = np.minimum(np.searchsorted(keys, key), len(keys) - 1)
-    vox = np.where(inside & (keys[pos] == key), pos, -1)
-    pair = np.flatnonzero(vox >= 0)
-    offsets = np.asarray(texture.entry_offsets, dtype=np.int64)
-    counts = offsets[vox[pair] + 1] - offsets[vox[pair]]
-    which = np.repeat(pair, counts)
-    other = np.repeat(offsets[vox[pair]] - np.concatenate([[0], np.cumsum(counts)[:-1]]), counts)
-    other = other + np.arange(int(counts.sum()))
+    which, other = entries_at(coords, texture.shape, texture.entry_offsets, cell)
     sheet = np.asarray(surface, bool)[other] | (sheets.fill[other] >= 0.5)
     parallel = np.abs(np.einsum("ek,ek->e", sheets.normal[other], n[which])) >= HALF_PARALLEL
     near = np.abs(np.einsum("ek,ek->e", sheets.normal[other], q[which]) - sheets.offset[other]) <= HALF_NEAR

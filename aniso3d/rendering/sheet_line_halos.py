@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aniso3d.grid import cell_keys, ranges
+from aniso3d.grid import entries_at
 from aniso3d.rendering.sheet_edges import EDGE_MIN_LENGTH, EDGE_NEAR, EDGE_PARALLEL, face_segments
 from aniso3d.rendering.sheet_halfplanes import C_RANGE, decoded_offset, line_inward, offset_code, plane_origin
 
@@ -94,22 +94,12 @@ def line_halos(texture, sheets, rows: np.ndarray, angle: np.ndarray, lo: np.ndar
     a, side = f_idx // 2, f_idx % 2
     step = np.zeros((len(r_idx), 3), dtype=np.int64)
     step[np.arange(len(r_idx)), a] = 2 * side - 1
-    shape = np.asarray(texture.shape, dtype=np.int64)
     coords = np.asarray(texture.coords, dtype=np.int64)
     owner = np.asarray(texture.entry_voxel, dtype=np.int64)
     cell = coords[owner[rows[r_idx]]] + step
     # Continued: a sheet of the voxel across within EDGE_NEAR of the face
     # segment's midpoint and EDGE_PARALLEL of the normal.
-    inside = np.all((cell >= 0) & (cell < shape), axis=1)
-    keys = cell_keys(coords, shape)
-    key = cell_keys(np.where(inside[:, None], cell, 0), shape)
-    pos = np.minimum(np.searchsorted(keys, key), len(keys) - 1)
-    vox = np.where(inside & (keys[pos] == key), pos, -1)
-    hit = np.flatnonzero(vox >= 0)
-    offsets = np.asarray(texture.entry_offsets, dtype=np.int64)
-    counts = offsets[vox[hit] + 1] - offsets[vox[hit]]
-    which = np.repeat(hit, counts)
-    other = ranges(offsets[vox[hit]], offsets[vox[hit] + 1])
+    which, other = entries_at(coords, texture.shape, texture.entry_offsets, cell)
     no = sheets.normal[other]
     local = mid[r_idx[which], f_idx[which]] - step[which]
     near = np.abs(np.einsum("ek,ek->e", no, local) - sheets.offset[other]) <= EDGE_NEAR
