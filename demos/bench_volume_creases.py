@@ -14,7 +14,8 @@ colour as its coverage (a read at compile time: the renderer drawing the
 rule off makes its programs while it is off). ``--rule lines``: strips
 drawn from ``STRIP_PIXELS`` 0.75 with their line halos
 (render/sheet_line_halos.py); off, ``LINE_HALOS`` False and strips from
-1.5 pixels, as before the halos.
+1.5 pixels, as before the halos. ``--rule foot``: the strips' ramps over
+``STRIP_FOOT`` of the pixel's footprint; off, 1 (the whole footprint).
 
 Per scene (corpus names, or mesh files), at the corpus bench's two cameras
 (*close*: the object filling the image; *minified*: a voxel about a pixel),
@@ -27,7 +28,7 @@ rule off in the second (each uploads the texture once, with the rule as set
 then).
 
     .venv/bin/python demos/bench_volume_creases.py [SCENE | MESH FILE ...] [--size 512]
-        [--rule crease|thick|back|lines] [--md docs/coverage.md]
+        [--rule crease|thick|back|lines|foot] [--md docs/coverage.md]
 """
 
 from __future__ import annotations
@@ -58,7 +59,8 @@ from aniso3d.rendering.renderer import Renderer
 RULES = {"crease": ({"SHEET_CREASE": 0.0}, "bench_volume_creases"),
          "thick": ({"THICK_OPPOSITE": -float("inf")}, "bench_volume_thick"),
          "back": ({"RUN_BACK_MIN": 1.0}, "bench_volume_back_colour"),
-         "lines": ({"LINE_HALOS": False, "STRIP_PIXELS": 1.5}, "bench_volume_line_halos")}  # fmt: skip
+         "lines": ({"LINE_HALOS": False, "STRIP_PIXELS": 1.5}, "bench_volume_line_halos"),
+         "foot": ({"STRIP_FOOT": 1.0}, "bench_volume_strip_foot")}  # fmt: skip
 
 
 def edge_error(truth_a: np.ndarray, img_a: np.ndarray, crop) -> float:

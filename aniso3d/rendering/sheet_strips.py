@@ -69,8 +69,10 @@ STRIP_AREA_ERROR = 0.01
 STRIP_PIXELS = 0.75
 #: Their ramps run over this share of the pixel's footprint (a box of the
 #: pixel's width; 0.75 gained the lattice 0.1 dB and 0.003-0.004 of FLIP at
-#: 3.3 and 1.6 pixels a voxel).
-STRIP_FOOT = 1.0
+#: 3.3 and 1.6 pixels a voxel, before the line halos). With the line halos,
+#: 0.85 (docs/coverage.md, "Halos of lines inside voxels": 0.8 to 0.9 were
+#: tried on the lattice, the mixed scene and three CAD meshes).
+STRIP_FOOT = 0.85
 #: Newton steps for the two offsets.
 _STEPS = 8
 #: Largest move of an offset in one step (voxel units).
