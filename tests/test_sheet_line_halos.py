@@ -152,3 +152,17 @@ def test_twin_agrees_where_the_halos_draw(r, yaw, pitch, shift, least):
     for y, x, (rgb, alpha) in changed[:20] + other[:10]:
         got = img[y, x]
         assert np.abs(rgb - got[:3]).max() < 1 / 255 and abs(alpha - got[3]) < 1 / 255, (y, x, rgb, alpha, got)
+
+
+def test_halos_made_in_chunks_are_the_same(beam_texture, monkeypatch):
+    """line_halos in chunks of 7 entries gives the halos it gives at once
+    (the memory bound changes nothing)."""
+    from aniso3d.rendering import sheet_line_halos
+    from aniso3d.rendering.volume import sheet_line_halos as layout_halos
+
+    tex, _, layout = beam_texture
+    whole = layout.line_halos
+    monkeypatch.setattr(sheet_line_halos, "_CHUNK", 7)
+    chunked = layout_halos(layout.sheets, layout.halfplanes, layout.strips, tex)
+    for f in LineHalos.__dataclass_fields__:
+        np.testing.assert_array_equal(getattr(chunked, f), getattr(whole, f), err_msg=f)

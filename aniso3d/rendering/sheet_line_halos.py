@@ -40,6 +40,9 @@ from aniso3d.rendering.sheet_halfplanes import C_RANGE, decoded_offset, line_inw
 #: Entry word 11's bit marking a line halo cut by its face (bits 0-2 and
 #: 4-6 hold no face for lines, bit 7 no second edge's kind).
 FACE_CUT_BIT = 7
+#: Entries whose halos are made per chunk (memory bound: (entry, face)
+#: pairs and the entries of the voxels across).
+_CHUNK = 100_000
 
 
 @dataclass(frozen=True)
@@ -84,6 +87,10 @@ def line_halos(texture, sheets, rows: np.ndarray, angle: np.ndarray, lo: np.ndar
     rows = np.asarray(rows, dtype=np.int64)
     if len(rows) == 0:
         return LineHalos.empty()
+    if len(rows) > _CHUNK:
+        parts = [line_halos(texture, sheets, rows[i : i + _CHUNK], angle[i : i + _CHUNK], lo[i : i + _CHUNK],
+                            hi[i : i + _CHUNK]) for i in range(0, len(rows), _CHUNK)]  # fmt: skip
+        return LineHalos(*(np.concatenate([getattr(p, f) for p in parts]) for f in LineHalos.__dataclass_fields__))
     n, d = sheets.normal[rows], sheets.offset[rows]
     length, mid = face_segments(n, d)
     r_idx, f_idx = np.nonzero(length >= EDGE_MIN_LENGTH)
