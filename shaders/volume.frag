@@ -562,8 +562,8 @@ void composite(int v, vec3 x_in, float t0, float chord) {
             bool strip = (sh.w >> 31u) == 1u && (sh.w & 8u) != 0u && !crease_line;
             bool hp = (sh.w >> 31u) == 1u && u_opacity_mode == 3 && foot > 0.0
                       && pixels >= (strip ? STRIP_PIXELS : HALF_PIXELS);
-            // A line halo (render/sheet_line_halos.py): a half-plane's or a
-            // strip's lines carried into the voxel beside it, drawn with them.
+            // A line halo (render/sheet_line_halos.py): a strip's lines
+            // carried into the voxel beside it, drawn with them.
             bool line_halo = halo && (sh.w >> 31u) == 1u;
             if (line_halo && !hp) continue;
             float share = hp ? 1.0 : 1.0 - (1.0 - fill_share.y) * (1.0 - zoom);

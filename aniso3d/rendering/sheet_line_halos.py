@@ -1,17 +1,16 @@
-"""Halos of the lines inside voxels: a half-plane's or a strip's footprint
-carried into the voxels beside it (docs/coverage.md, "Halos of lines inside
-voxels").
+"""Halos of the lines inside voxels: a strip's footprint carried into the
+voxels beside it (docs/coverage.md, "Halos of lines inside voxels").
 
-A half-plane (:mod:`~aniso3d.rendering.sheet_halfplanes`) or a strip
-(:mod:`~aniso3d.rendering.sheet_strips`) counts, where the ray crosses its
-plane inside its voxel, the share of the pixel's footprint on its covered
-side of its lines. With a voxel about a pixel the footprint reaches half a
-voxel past the voxel: a ray that crosses the plane extended in the voxel
-beside it, within half a footprint of a line, should count the part of the
-footprint on the covered side too, and nothing there knew of the line. So
-the lines were drawn only from 1.5 to 2 pixels a voxel, and smaller the
-entries were spread over their sections (the lattice's beams, the shell's
-border, a CAD part's faces meeting at an edge inside a voxel).
+A strip (:mod:`~aniso3d.rendering.sheet_strips`: a thin closed beam's face
+between two lines, or a closed surface's half-plane, a strip of one line)
+counts, where the ray crosses its plane inside its voxel, the share of the
+pixel's footprint between its lines. With a voxel about a pixel the
+footprint reaches half a voxel past the voxel: a ray that crosses the plane
+extended in the voxel beside it, within half a footprint of a line, should
+count the part of the footprint on the covered side too, and nothing there
+knew of the line. So strips were drawn only from 1.5 pixels a voxel, and
+smaller they were spread over their sections (the lattice's beams, a CAD
+part's faces meeting at an edge inside a voxel).
 
 A **line halo** is a copy of such an entry, with no area, in the voxel
 across one of its voxel's faces that its plane crosses, where no sheet of
@@ -24,7 +23,10 @@ face's section lies past a line on the uncovered side (the line runs along
 the face), that share is all; where the line crosses the face (the covered
 part reaches it), it is also cut by the face, as a sheet's halo is past an
 edge on a voxel face (:func:`~aniso3d.rendering.sheet_edges.edge_ramp`), so
-that a line ending in its voxel does not run on through the next.
+that a line ending in its voxel does not run on through the next. The
+function takes any lines; the renderer gives it the strips only (an open
+surface's half-planes with halos over-covered the corpus shell's border:
+:func:`~aniso3d.rendering.volume.sheet_line_halos`).
 """
 
 from __future__ import annotations
