@@ -16,6 +16,9 @@ drawn from ``STRIP_PIXELS`` 0.75 with their line halos
 (render/sheet_line_halos.py); off, ``LINE_HALOS`` False and strips from
 1.5 pixels, as before the halos. ``--rule foot``: the strips' ramps over
 ``STRIP_FOOT`` of the pixel's footprint; off, 1 (the whole footprint).
+``--rule range``: the lines' offsets coded over ``C_RANGE`` 2 voxels, so
+that a line halo's line (its neighbour's) fits; off, 0.875 (the halos whose
+line falls outside are left out).
 
 Per scene (corpus names, or mesh files), at the corpus bench's two cameras
 (*close*: the object filling the image; *minified*: a voxel about a pixel),
@@ -28,11 +31,12 @@ rule off in the second (each uploads the texture once, with the rule as set
 then).
 
     .venv/bin/python demos/bench_volume_creases.py [SCENE | MESH FILE ...] [--size 512]
-        [--rule crease|thick|back|lines|foot] [--md docs/coverage.md]
+        [--rule crease|thick|back|lines|foot|range] [--md docs/coverage.md]
 """
 
 from __future__ import annotations
 
+import importlib
 from pathlib import Path
 
 import numpy as np
@@ -60,7 +64,26 @@ RULES = {"crease": ({"SHEET_CREASE": 0.0}, "bench_volume_creases"),
          "thick": ({"THICK_OPPOSITE": -float("inf")}, "bench_volume_thick"),
          "back": ({"RUN_BACK_MIN": 1.0}, "bench_volume_back_colour"),
          "lines": ({"LINE_HALOS": False, "STRIP_PIXELS": 1.5}, "bench_volume_line_halos"),
-         "foot": ({"STRIP_FOOT": 1.0}, "bench_volume_strip_foot")}  # fmt: skip
+         "foot": ({"STRIP_FOOT": 1.0}, "bench_volume_strip_foot"),
+         "range": ({"sheet_halfplanes.C_RANGE": 0.875, "HALF_C_RANGE": 0.875, "sheet_line_halos.C_RANGE": 0.875},
+                   "bench_volume_line_range")}  # fmt: skip
+
+
+def _where(name: str):
+    """The module (aniso3d.rendering's ``module.NAME``, else volume) and the
+    constant's name."""
+    module, _, const = name.rpartition(".")
+    return (importlib.import_module(f"aniso3d.rendering.{module}") if module else volume), const
+
+
+def constant(name: str):
+    module, const = _where(name)
+    return getattr(module, const)
+
+
+def set_constant(name: str, value) -> None:
+    module, const = _where(name)
+    setattr(module, const, value)
 
 
 def edge_error(truth_a: np.ndarray, img_a: np.ndarray, crop) -> float:
@@ -76,18 +99,18 @@ def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
     label = Path(name).name if Path(name).suffix else name
     tex = build_texture(mesh, args.resolution, args.directions)
     off, _ = RULES[args.rule]
-    rule = {k: getattr(volume, k) for k in off}
+    rule = {k: constant(k) for k in off}
     rows = []
     with Renderer((args.size, args.size)) as before:
         for spec, truth, row in scene_cameras(renderer, mesh, label, args):
             truth_a = renderer.render(mesh, spec.camera, "mesh", ssaa=args.gt_ssaa, alpha=True)[..., 3]
             for k, v in off.items():
-                setattr(volume, k, v)
+                set_constant(k, v)
             try:
                 old = before.render(tex, spec.camera, "volume", alpha=True)
             finally:
                 for k, v in rule.items():
-                    setattr(volume, k, v)
+                    set_constant(k, v)
             new = renderer.render(tex, spec.camera, "volume", alpha=True)
             for key, img in (("off", old), ("on", new)):
                 row[key] = scored(truth, img[..., :3], spec)
@@ -111,7 +134,7 @@ def main() -> None:
         f"{run.header(command('demos/bench_volume_creases.py', args, '--rule', args.rule))} Texture "
         f"{args.resolution}^3, K = {args.directions}; truth {args.gt_ssaa}x{args.gt_ssaa} polygons; PSNR (dB) / "
         f"FLIP inside the object's box, as the corpus bench. Rule: "
-        f"{', '.join(f'{k} {getattr(volume, k)}' for k in off)} "
+        f"{', '.join(f'{k} {constant(k)}' for k in off)} "
         f"(off: {', '.join(f'{k} {v}' for k, v in off.items())}); "
         f"SHEET_CREASE {volume.SHEET_CREASE}, HALF_PIXELS {volume.HALF_PIXELS}, BACK_HIDE "
         f"{volume.BACK_HIDE}, THICK_STEPS {volume.THICK_STEPS}, RUN_BACK_MIN {volume.RUN_BACK_MIN}.",

@@ -80,18 +80,23 @@ class LineHalos:
                          np.zeros(0, bool))  # fmt: skip
 
 
-def line_halos(texture, sheets, rows: np.ndarray, angle: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> LineHalos:
+def line_halos(
+    texture, sheets, rows: np.ndarray, angle: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+    one_line_reach: float = np.inf,
+) -> LineHalos:  # fmt: skip
     """The :class:`LineHalos` of the entries ``rows`` of ``texture`` (its
     :class:`~aniso3d.rendering.volume.EntrySheets` ``sheets``), whose lines
     are at ``angle`` (R,) in their sheets' tangent frames with offsets
     ``lo`` and ``hi`` (R,; covered where ``lo <= (p - q0) . u <= hi``, hi inf
-    for a half-plane). Vectorised over (entry, face) pairs."""
+    for a half-plane). A half-plane's halo is left out where its line lies
+    farther than ``one_line_reach`` (voxel units, in the plane) from the
+    halo's q0. Vectorised over (entry, face) pairs."""
     rows = np.asarray(rows, dtype=np.int64)
     if len(rows) == 0:
         return LineHalos.empty()
     if len(rows) > _CHUNK:
         parts = [line_halos(texture, sheets, rows[i : i + _CHUNK], angle[i : i + _CHUNK], lo[i : i + _CHUNK],
-                            hi[i : i + _CHUNK]) for i in range(0, len(rows), _CHUNK)]  # fmt: skip
+                            hi[i : i + _CHUNK], one_line_reach) for i in range(0, len(rows), _CHUNK)]  # fmt: skip
         return LineHalos(*(np.concatenate([getattr(p, f) for p in parts]) for f in LineHalos.__dataclass_fields__))
     n, d = sheets.normal[rows], sheets.offset[rows]
     length, mid = face_segments(n, d)
@@ -125,6 +130,9 @@ def line_halos(texture, sheets, rows: np.ndarray, angle: np.ndarray, lo: np.ndar
     hi_new = hi[r_idx] - shift
     # The near line's offset must fit its 12 bits; a far one is float32.
     fits = np.abs(lo_new) <= C_RANGE
+    # A single line's halo only near it (a closed face's edge at a crease:
+    # the partner face covers the footprint past it).
+    fits &= np.isfinite(hi_new) | (np.abs(lo_new) <= one_line_reach)
     # The face's segment across the lines: past one line on the uncovered
     # side at both ends (the line runs along the face), or not.
     seg = np.cross(nr, np.eye(3)[a])

@@ -283,6 +283,14 @@ SHEET_CREASE = 0.5
 #: them through line halos (render/sheet_line_halos.py), so that they can be
 #: drawn where a voxel spans about a pixel. False: none (as before them).
 LINE_HALOS = True
+#: ... but a closed surface's half-plane (a strip of one line: a face
+#: ending at a crease, whose partner face covers the footprint past it)
+#: has a halo only where its line lies within this (voxel units, in the
+#: plane) of the halo's voxel's q0: farther ones added 0.003-0.004 to a
+#: turned cube's outline alpha error at 1.5 pixels a voxel and cost the
+#: duck, the monkey and quadknot 0.04-0.08 dB minified, for nothing on
+#: the lattice (docs/coverage.md, "Halos of lines inside voxels").
+ONE_LINE_REACH = 0.875
 #: Entry word 11's bit marking a halo of a crease sheet's half-plane
 #: (volume.frag: not drawn where the half-plane is).
 CREASE_BIT = 27
@@ -1280,7 +1288,8 @@ def sheet_line_halos(sheets: EntrySheets, halfplanes: SheetHalfplanes, strips: S
     if not LINE_HALOS:
         return LineHalos.empty()
     rows = np.flatnonzero(strips.mask)
-    return line_halos(texture, sheets, rows, strips.angle[rows], strips.lo[rows], strips.hi[rows])
+    return line_halos(texture, sheets, rows, strips.angle[rows], strips.lo[rows], strips.hi[rows],
+                      ONE_LINE_REACH)  # fmt: skip
 
 
 def line_halo_entries(entries: np.ndarray, lh: LineHalos, strips: SheetStrips) -> np.ndarray:
