@@ -279,9 +279,9 @@ RUN_SHARE = 0.999
 #: stays in the runs, its line cutting it as an edge on a voxel face cuts a
 #: sheet (render/sheet_creases.py).
 SHEET_CREASE = 0.5
-#: Half-planes and strips carry their footprint into the voxels beside
-#: them through line halos (render/sheet_line_halos.py), so that they can be
-#: drawn where a voxel spans about a pixel. False: none (as before them).
+#: Strips carry their footprint into the voxels beside them through line
+#: halos (render/sheet_line_halos.py), so that they can be drawn where a
+#: voxel spans about a pixel (STRIP_PIXELS). False: none (as before them).
 LINE_HALOS = True
 #: ... but a closed surface's half-plane (a strip of one line: a face
 #: ending at a crease, whose partner face covers the footprint past it)
