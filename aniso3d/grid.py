@@ -52,20 +52,19 @@ def ranges(starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
 
 
 def entries_at(
-    coords: np.ndarray, shape, entry_offsets: np.ndarray, cells: np.ndarray
+    keys: np.ndarray, shape, entry_offsets: np.ndarray, cells: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """The entries of the occupied voxels at ``cells`` (N, 3; outside the
-    grid or empty: none), of a sparse grid whose voxels ``coords`` (sorted
-    by :func:`cell_keys`) own the entries ``entry_offsets[v]`` to
+    grid or empty: none), of a sparse grid whose voxels, of sorted
+    :func:`cell_keys` ``keys``, own the entries ``entry_offsets[v]`` to
     ``entry_offsets[v + 1]``: two int64 arrays, each entry's cell (an index
     into ``cells``) and the entry, cell by cell, in order."""
-    coords = np.asarray(coords, dtype=np.int64)
+    keys = np.asarray(keys, dtype=np.int64)
     shape = np.asarray(shape, dtype=np.int64)
     cells = np.asarray(cells, dtype=np.int64).reshape(-1, 3)
-    if len(coords) == 0 or len(cells) == 0:
+    if len(keys) == 0 or len(cells) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     inside = np.all((cells >= 0) & (cells < shape), axis=1)
-    keys = cell_keys(coords, shape)
     key = cell_keys(np.where(inside[:, None], cells, 0), shape)
     pos = np.minimum(np.searchsorted(keys, key), len(keys) - 1)
     hit = np.flatnonzero(inside & (keys[pos] == key))

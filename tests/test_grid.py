@@ -134,7 +134,7 @@ def test_entries_at_lists_each_cells_entries_against_a_loop():
     counts = rng.integers(1, 4, len(coords))
     offsets = np.concatenate([[0], np.cumsum(counts)])
     cells = rng.integers(-1, 6, (200, 3))
-    which, other = entries_at(coords, shape, offsets, cells)
+    which, other = entries_at(keys, shape, offsets, cells)
     want_w, want_o = [], []
     for i, c in enumerate(cells):
         match = np.flatnonzero((coords == c).all(axis=1))

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aniso3d.grid import entries_at, tangent_frame
+from aniso3d.grid import cell_keys, entries_at, tangent_frame
 
 #: Entries whose facets fill between these shares of their plane's section
 #: can be half-planes (fuller: a surface sheet; emptier: too little to place).
@@ -308,7 +308,7 @@ def _continued(texture, sheets, surface: np.ndarray, angle: np.ndarray, rows: np
     step = np.floor(q).astype(np.int64)
     cell = coords[owner[rows]] + step
     q -= step
-    which, other = entries_at(coords, texture.shape, texture.entry_offsets, cell)
+    which, other = entries_at(cell_keys(coords, texture.shape), texture.shape, texture.entry_offsets, cell)
     sheet = np.asarray(surface, bool)[other] | (sheets.fill[other] >= 0.5)
     parallel = np.abs(np.einsum("ek,ek->e", sheets.normal[other], n[which])) >= HALF_PARALLEL
     near = np.abs(np.einsum("ek,ek->e", sheets.normal[other], q[which]) - sheets.offset[other]) <= HALF_NEAR

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aniso3d.grid import entries_at
+from aniso3d.grid import cell_keys, entries_at
 from aniso3d.rendering.sheet_edges import EDGE_MIN_LENGTH, EDGE_NEAR, EDGE_PARALLEL, face_segments
 from aniso3d.rendering.sheet_halfplanes import C_RANGE, decoded_offset, line_inward, offset_code, plane_origin
 
@@ -113,7 +113,7 @@ def line_halos(
     cell = coords[owner[rows[r_idx]]] + step
     # Continued: a sheet of the voxel across within EDGE_NEAR of the face
     # segment's midpoint and EDGE_PARALLEL of the normal.
-    which, other = entries_at(coords, texture.shape, texture.entry_offsets, cell)
+    which, other = entries_at(cell_keys(coords, texture.shape), texture.shape, texture.entry_offsets, cell)
     no = sheets.normal[other]
     local = mid[r_idx[which], f_idx[which]] - step[which]
     near = np.abs(np.einsum("ek,ek->e", no, local) - sheets.offset[other]) <= EDGE_NEAR

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aniso3d.grid import cell_keys, tangent_frame
+from aniso3d.grid import cell_keys, entries_at, tangent_frame
 
 #: Neighbouring sheets within this of the sheet's normal (|n . n'|, about 25
 #: degrees) take part in its fit: a bent surface's, not a fold's other side.
@@ -93,18 +93,9 @@ def sheet_slopes(texture, sheets, surface: np.ndarray) -> SheetSlopes:
             delta = np.zeros((len(rows), 3), dtype=np.int64)
             delta[idx, (axis + across) % 3] = sign
             delta[idx, axis] = k
-            cell = coords[owner[rows]] + delta
-            inside = np.all((cell >= 0) & (cell < grid), axis=1)
-            key = cell_keys(np.where(inside[:, None], cell, 0), grid)
-            pos = np.minimum(np.searchsorted(keys, key), len(keys) - 1)
-            vox = np.where(inside & (keys[pos] == key), pos, -1)
-            pair = np.flatnonzero(vox >= 0)
-            if len(pair) == 0:
+            which, other = entries_at(keys, grid, offsets, coords[owner[rows]] + delta)
+            if len(which) == 0:
                 continue
-            counts = offsets[vox[pair] + 1] - offsets[vox[pair]]
-            which = np.repeat(pair, counts)
-            first = np.repeat(offsets[vox[pair]] - np.concatenate([[0], np.cumsum(counts)[:-1]]), counts)
-            other = first + np.arange(int(counts.sum()))
             c_moved = local[rows[which]] - delta[which]
             dist = np.abs(np.einsum("ek,ek->e", nh[other], c_moved) - d[other])
             ok = (np.abs(np.einsum("ek,ek->e", nh[other], n[which])) >= SLOPE_PARALLEL) & (dist <= SLOPE_NEAR)
