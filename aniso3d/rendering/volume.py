@@ -1187,13 +1187,13 @@ def _with_halos(run, layout, halos, texture, w, lighting, normal, x_in, chords, 
 
 
 def _line_halo_terms(layout, line_halos, texture, w, lighting, normal, x_in, chords, pixels, hide: float):
-    """The line halos ``line_halos`` (per voxel, indices into the layout's)
-    as partial sheets of their voxels: (N,) each one's voxel, the share of
-    the footprint it covers where the ray crosses its plane (its entry's
-    lines, moved into the voxel, and where its line crosses its face, cut
-    by the face: :mod:`~aniso3d.rendering.sheet_line_halos`), its colour and
-    crossing parameter. Mirrors volume.frag (a line halo: drawn where its
-    entry's lines are)."""
+    """The line halos ``line_halos`` (per voxel, indices into the layout's:
+    the strips', :func:`sheet_line_halos`) as partial sheets of their
+    voxels: (N,) each one's voxel, the share of the footprint it covers
+    where the ray crosses its plane (its strip's lines, moved into the
+    voxel, and where its line crosses its face, cut by the face:
+    :mod:`~aniso3d.rendering.sheet_line_halos`), its colour and crossing
+    parameter. Mirrors volume.frag (a line halo: drawn where its strip is)."""
     counts = np.array([len(h) for h in line_halos], dtype=np.int64)
     if counts.sum() == 0:
         z = np.zeros(0)
@@ -1202,10 +1202,9 @@ def _line_halo_terms(layout, line_halos, texture, w, lighting, normal, x_in, cho
     owner = np.repeat(np.arange(len(line_halos)), counts)
     lh, sh, st = layout.line_halos, layout.sheets, layout.strips
     src = lh.row[ids]
-    strip = st.mask[src]
     pix = np.asarray(pixels, dtype=np.float64)[owner]
     with np.errstate(divide="ignore"):
-        drawn = (1.0 / pix > 0.0) & (pix >= np.where(strip, STRIP_PIXELS, HALF_PIXELS))
+        drawn = (1.0 / pix > 0.0) & (pix >= STRIP_PIXELS)
     nh = sh.normal[src]
     nw = nh @ w
     x = np.asarray(x_in, np.float64)[owner]
@@ -1216,9 +1215,7 @@ def _line_halo_terms(layout, line_halos, texture, w, lighting, normal, x_in, cho
                                            pix, "filtered")  # fmt: skip
     with np.errstate(divide="ignore", invalid="ignore"):
         p = x + w[None, :] * np.where(nw != 0.0, -s_in / nw, 0.0)[:, None]
-    angle = np.where(strip, st.angle[src], layout.halfplanes.angle[src])
-    cover = strip_cover(angle, lh.lo[ids], np.where(strip, lh.hi[ids], np.inf), lh.offset[ids], p, nh, w,
-                        np.where(strip, STRIP_FOOT, 1.0) * foot)  # fmt: skip
+    cover = strip_cover(st.angle[src], lh.lo[ids], lh.hi[ids], lh.offset[ids], p, nh, w, STRIP_FOOT * foot)
     cut = lh.cut[ids]
     if cut.any():
         cover[cut] *= edge_ramp(lh.face[ids][cut], p[cut], nh[cut], w, foot[cut], inside=False)
@@ -1292,22 +1289,22 @@ def sheet_line_halos(sheets: EntrySheets, halfplanes: SheetHalfplanes, strips: S
                       ONE_LINE_REACH)  # fmt: skip
 
 
-def line_halo_entries(entries: np.ndarray, lh: LineHalos, strips: SheetStrips) -> np.ndarray:
-    """(H, ENTRY_WORDS) uint32: the line halos ``lh`` as volume.frag reads
-    them: their entries' words with no area, their planes and lines in
-    their voxels' frames, the halo's face in word 11 (bits 8-10) and
-    whether the face cuts it (bit FACE_CUT_BIT)."""
+def line_halo_entries(entries: np.ndarray, lh: LineHalos) -> np.ndarray:
+    """(H, ENTRY_WORDS) uint32: the strips' line halos ``lh`` as
+    volume.frag reads them: their strips' words with no area, their planes
+    and lines in their voxels' frames (the far line in word 12), the halo's
+    face in word 11 (bits 8-10) and whether the face cuts it (bit
+    FACE_CUT_BIT)."""
     halo = entries[lh.row].copy()
     halo[:, 3] = np.float32(0.0).view(np.uint32)
     halo[:, 8] = lh.offset.astype(np.float32).view(np.uint32)
-    strip = strips.mask[lh.row]
     no_face = np.uint32(NO_FACE | (NO_FACE << 4))
     halo[:, 11] = (
         (halo[:, 11] & np.uint32(0x7F808))  # the angle and the strip bit kept
         | (offset_code(lh.lo).astype(np.uint32) << 19) | np.uint32(1 << 31) | no_face
         | (lh.face.astype(np.uint32) << 8) | (lh.cut.astype(np.uint32) << FACE_CUT_BIT)
     )  # fmt: skip
-    halo[:, 12] = np.where(strip, lh.hi.astype(np.float32).view(np.uint32), halo[:, 12])
+    halo[:, 12] = lh.hi.astype(np.float32).view(np.uint32)
     return halo
 
 
@@ -1763,7 +1760,7 @@ def pack_volume_grid(texture: AnisoTexture) -> PackedVolume:
         np.full((len(halo), MAX_EDGES), -1), np.stack([edges.halo_kind, none[:, 1]], 1),
         np.stack([edges.halo_angle, none[:, 1]], 1), edges.halo_face,
     ) | np.where(crease_hp[edges.halo_row], np.uint32(1 << CREASE_BIT), np.uint32(0))
-    halo = np.concatenate([halo, line_halo_entries(entries, lh, strips)])
+    halo = np.concatenate([halo, line_halo_entries(entries, lh)])
     voxel_of = np.concatenate([texture.entry_voxel, halo_vox])
     order = np.lexsort((np.arange(len(voxel_of)), np.arange(len(voxel_of)) >= E, voxel_of))
     entries = np.concatenate([entries, halo])[order]
