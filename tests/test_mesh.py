@@ -142,6 +142,39 @@ def test_obj_with_mtl_gives_per_face_material(tmp_path):
     np.testing.assert_allclose(m.shininess[bark], 8.0)
 
 
+def test_a_zero_exponent_is_no_highlight(tmp_path):
+    """MeshLab and Blender write ``Ns 0`` for no highlight, glTF roughness 1
+    maps to exponent 0: both load as LEAST_SHININESS, not as a constant lobe
+    that adds ks to every lit pixel (a Ks 0.8 sphere drew white on white)."""
+    import trimesh
+
+    from aniso3d.build.mesh import LEAST_SHININESS
+    from aniso3d.rendering.lighting import Lighting, shade_np
+
+    (tmp_path / "rough.mtl").write_text("newmtl rough\nKd 0.2 0.4 0.8\nKs 0.8 0.8 0.8\nNs 0\n")
+    (tmp_path / "rough.obj").write_text("mtllib rough.mtl\nusemtl rough\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    m = load_mesh(tmp_path / "rough.obj")
+    np.testing.assert_allclose(m.shininess, [LEAST_SHININESS])
+    assert LEAST_SHININESS >= 1.0
+    # Seen head-on, off the light's mirror direction: the highlight is a
+    # share of ks (at exponent 0 it was all of it).
+    n = np.array([[0.0, 0.0, 1.0]])
+    view = n
+    kd, ks = np.array([[0.2, 0.4, 0.8]]), np.array([0.8])
+    light = Lighting()
+    flat = shade_np(n, view, kd, ks, np.array([0.0]), light)
+    read = shade_np(n, view, kd, ks, m.shininess, light)
+    assert np.all(read < flat - 0.1)
+
+    tri = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], process=False)
+    tri.visual = trimesh.visual.TextureVisuals(
+        material=trimesh.visual.material.PBRMaterial(baseColorFactor=[0.2, 0.4, 0.6, 1.0], roughnessFactor=1.0,
+                                                     metallicFactor=1.0)  # fmt: skip
+    )
+    tri.export(tmp_path / "rough.glb")
+    np.testing.assert_allclose(load_mesh(tmp_path / "rough.glb").shininess, [LEAST_SHININESS])
+
+
 def test_obj_without_mtl_gets_defaults(tmp_path):
     (tmp_path / "plain.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     m = load_mesh(tmp_path / "plain.obj", name="custom")
@@ -278,14 +311,22 @@ def test_point_cloud_file_is_not_a_mesh(tmp_path):
         load_mesh(tmp_path / "pts.ply")
 
 
-@pytest.mark.parametrize("suffix, module", [(".3mf", "networkx"), (".dae", "collada")])
+@pytest.mark.parametrize("suffix, module", [(".3mf", "networkx"), (".dae", "collada"), (".zae", "collada")])
 def test_3mf_and_collada_read_with_the_formats_extra(tmp_path, suffix, module):
-    """3MF and COLLADA need trimesh's optional readers ('aniso3d[formats]')."""
+    """3MF and COLLADA (plain, or zipped as .zae) need trimesh's optional
+    readers ('aniso3d[formats]')."""
     pytest.importorskip(module)
+    import zipfile
+
     import trimesh
 
     box = trimesh.creation.box(extents=(1.0, 2.0, 3.0))
-    box.export(tmp_path / f"box{suffix}")
+    if suffix == ".zae":
+        box.export(tmp_path / "box.dae")
+        with zipfile.ZipFile(tmp_path / "box.zae", "w") as z:
+            z.write(tmp_path / "box.dae", "box.dae")
+    else:
+        box.export(tmp_path / f"box{suffix}")
     mesh = load_mesh(tmp_path / f"box{suffix}")
     assert len(mesh.faces) == 12
     assert mesh.area() == pytest.approx(2 * (1 * 2 + 2 * 3 + 1 * 3), rel=1e-6)

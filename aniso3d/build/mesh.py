@@ -25,6 +25,12 @@ DEFAULT_KD = (0.7, 0.7, 0.7)
 DEFAULT_KS = 0.1
 #: Phong exponent where the material does not give one.
 DEFAULT_SHININESS = 16.0
+#: A file's Phong exponent below this is read as this. MeshLab and Blender
+#: write ``Ns 0`` for a surface with no highlight (Blender: roughness 1),
+#: and glTF's roughness 1 maps to 0; exponent 0 is a constant lobe, which
+#: added ks to every lit pixel and drew such models washed out, a white
+#: sphere on the white background.
+LEAST_SHININESS = 1.0
 #: Vertices closer than this share of a mesh's extent are one position when
 #: its topology is read (:func:`face_topology`): float noise of exporters is
 #: far below it, any detail a texture resolves far above.
@@ -214,7 +220,7 @@ def concatenate(meshes: list[Mesh], name: str = "mesh") -> Mesh:
 
 # --------------------------------------------------------------------------- loading
 
-MESH_SUFFIXES = {".obj", ".ply", ".stl", ".glb", ".gltf", ".off", ".dae", ".3mf"}
+MESH_SUFFIXES = {".obj", ".ply", ".stl", ".glb", ".gltf", ".off", ".dae", ".zae", ".3mf"}
 
 
 def _missing_module(exc: ImportError) -> str:
@@ -253,7 +259,8 @@ def load_mesh(path: str | os.PathLike, name: str | None = None) -> Mesh:
     per face), a texture image sampled at each face's UV centroid, the material's
     main colour, else :data:`DEFAULT_KD`. ``ks`` and the Phong exponent come
     from the material where it has them (OBJ ``Ks``/``Ns``; glTF roughness
-    mapped to an exponent), else :data:`DEFAULT_KS` / :data:`DEFAULT_SHININESS`.
+    mapped to an exponent; at least :data:`LEAST_SHININESS`), else
+    :data:`DEFAULT_KS` / :data:`DEFAULT_SHININESS`.
     """
     import trimesh
 
@@ -399,7 +406,7 @@ def _material_values(mat):
         metal = getattr(mat, "metallicFactor", None)
         if rough is not None:
             r = float(np.clip(rough, 0.02, 1.0))
-            sh = 2.0 / (r**4) - 2.0  # Blinn-Phong exponent equivalent to GGX roughness
+            sh = max(2.0 / (r**4) - 2.0, LEAST_SHININESS)  # Blinn-Phong exponent equivalent to GGX roughness
             ks = 0.04 + 0.5 * (1.0 - r)
         if metal is not None and ks is not None:
             ks = min(1.0, ks + 0.5 * float(metal))
@@ -418,7 +425,7 @@ def _material_values(mat):
             ks = float(s[:3].mean() / (255.0 if s.max() > 1.0 else 1.0))
     gloss = getattr(mat, "glossiness", None)
     if gloss is not None and np.isfinite(gloss):
-        sh = float(gloss)
+        sh = max(float(gloss), LEAST_SHININESS)
     return kd, ks, sh
 
 
