@@ -18,7 +18,11 @@ drawn from ``STRIP_PIXELS`` 0.75 with their line halos
 ``STRIP_FOOT`` of the pixel's footprint; off, 1 (the whole footprint).
 ``--rule range``: the lines' offsets coded over ``C_RANGE`` 2 voxels, so
 that a line halo's line (its neighbour's) fits; off, 0.875 (the halos whose
-line falls outside are left out).
+line falls outside are left out). ``--rule split``: where the plane goes
+on across a face as another strip, a strip's halo carries the part of its
+band that strip leaves (``sheet_line_halos.SPLIT_REST``: a beam's face
+split by a voxel face along its length); off, None (no halo where the plane
+goes on).
 
 Per scene (corpus names, or mesh files), at the corpus bench's two cameras
 (*close*: the object filling the image; *minified*: a voxel about a pixel),
@@ -31,7 +35,7 @@ rule off in the second (each uploads the texture once, with the rule as set
 then).
 
     .venv/bin/python demos/bench_volume_creases.py [SCENE | MESH FILE ...] [--size 512]
-        [--rule crease|thick|back|lines|foot|range] [--md docs/coverage.md]
+        [--rule crease|thick|back|lines|foot|range|split] [--md docs/coverage.md]
 """
 
 from __future__ import annotations
@@ -66,7 +70,8 @@ RULES = {"crease": ({"SHEET_CREASE": 0.0}, "bench_volume_creases"),
          "lines": ({"LINE_HALOS": False, "STRIP_PIXELS": 1.5}, "bench_volume_line_halos"),
          "foot": ({"STRIP_FOOT": 1.0}, "bench_volume_strip_foot"),
          "range": ({"sheet_halfplanes.C_RANGE": 0.875, "HALF_C_RANGE": 0.875, "sheet_line_halos.C_RANGE": 0.875},
-                   "bench_volume_line_range")}  # fmt: skip
+                   "bench_volume_line_range"),
+         "split": ({"sheet_line_halos.SPLIT_REST": None}, "bench_volume_split_halos")}  # fmt: skip
 
 
 def _where(name: str):

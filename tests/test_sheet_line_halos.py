@@ -41,8 +41,10 @@ def test_a_halos_lines_are_its_strips(beam_texture):
     """Points of each halo's plane in its voxel lie on the same side of, and
     as far from, the halo's lines as of its strip's (the strip's frame
     shifted by the voxel step): within half the near line's 12-bit step
-    (4.9e-4 voxel) and float32 for the far one. The halo's plane is the
-    strip's."""
+    (4.9e-4 voxel) and float32 for the far one; but a split face's halo
+    (SPLIT_REST), whose band is the part of its strip's that the strip
+    across leaves: within its strip's band, one line its strip's. The
+    halo's plane is the strip's."""
     tex, _, layout = beam_texture
     lh, sh, st = layout.line_halos, layout.sheets, layout.strips
     assert len(lh.row) > 50
@@ -53,40 +55,110 @@ def test_a_halos_lines_are_its_strips(beam_texture):
     assert np.all(np.abs(step).sum(axis=1) == 1)
     np.testing.assert_allclose(lh.offset, sh.offset[r] - np.einsum("ek,ek->e", n, step), atol=1e-12)
     # A point of the plane in the halo's voxel (local), and the same point
-    # in the strip's voxel's frame.
+    # in the strip's voxel's frame: the halo's lines in the strip's frame.
     p = rng.random((len(r), 3))
     p -= (np.einsum("ek,ek->e", n, p) - lh.offset)[:, None] * n
     u = line_inward(st.angle[r], n)
     s_halo = np.einsum("ek,ek->e", p - plane_origin(n, lh.offset), u)
     s_strip = np.einsum("ek,ek->e", p + step - plane_origin(n, sh.offset[r]), u)
+    lo, hi = lh.lo + s_strip - s_halo, lh.hi + s_strip - s_halo
     code_step = 2 * C_RANGE / ((1 << C_BITS) - 1)
-    np.testing.assert_allclose(s_halo - lh.lo, s_strip - st.lo[r], atol=0.5 * code_step + 1e-9)
+    tol = 0.5 * code_step + 1e-5
+    same_lo, same_hi = np.abs(lo - st.lo[r]) <= tol, np.isclose(hi, st.hi[r], rtol=0, atol=1e-5)
+    same_hi |= ~np.isfinite(st.hi[r]) & ~np.isfinite(lh.hi)
+    assert np.all(lo >= st.lo[r] - tol) and np.all(hi <= st.hi[r] + tol)
+    assert np.all(same_lo | same_hi)
+    whole = same_lo & same_hi
+    assert whole.mean() > 0.5 and (~whole).any()
     far = np.isfinite(st.hi[r])
     assert far.any()
-    np.testing.assert_allclose((s_halo - lh.hi)[far], (s_strip - st.hi[r])[far], atol=1e-5)
 
 
-def test_no_halo_where_the_plane_goes_on(beam_texture):
+def _band_in(lh, i, sh, st, r):
+    """Strip ``r``'s band in the frame of halo ``i`` (same voxel), along the
+    halo's inward normal."""
+    n = sh.normal[lh.row[i]]
+    q = plane_origin(n[None], lh.offset[i : i + 1])[0]
+    u = line_inward(st.angle[lh.row[i] : lh.row[i] + 1], n[None])[0]
+    n2 = sh.normal[r]
+    u2 = line_inward(st.angle[r : r + 1], n2[None])[0]
+    c = (q - plane_origin(n2[None], sh.offset[r : r + 1])[0]) @ u2
+    a, b = st.lo[r] - c, st.hi[r] - c
+    return (-b, -a) if u2 @ u < 0 else (a, b)
+
+
+def test_no_halo_where_the_plane_goes_on(beam_texture, monkeypatch):
     """A beam's face goes on through the voxels along the beam: no halo of
     a strip lies in a voxel holding an entry of the same plane (normal
-    within 0.7, the plane within 0.3 voxel of the halo's at its centre);
-    every halo lies in a cell beside the beam's, most of them empty."""
+    within 0.7, the plane within 0.3 voxel of the halo's at its centre)
+    but a strip of it whose band the halo's does not overlap (at most
+    0.005 voxel, a few 12-bit steps: measured 0.0026), the other part of a
+    face a voxel face splits along its length (SPLIT_REST); every halo
+    lies in a cell beside the beam's, and those of split faces are the only
+    ones SPLIT_REST adds."""
+    from aniso3d.rendering import sheet_line_halos
+
     tex, _, layout = beam_texture
-    lh, sh = layout.line_halos, layout.sheets
+    lh, sh, st = layout.line_halos, layout.sheets, layout.strips
     coords = np.asarray(tex.coords, np.int64)
     keys = cell_keys(coords, np.asarray(tex.shape))
     inside = np.all((lh.cell >= 0) & (lh.cell < np.asarray(tex.shape)), axis=1)
     hk = cell_keys(np.where(inside[:, None], lh.cell, 0), np.asarray(tex.shape))
     pos = np.minimum(np.searchsorted(keys, hk), len(keys) - 1)
     occupied = inside & (keys[pos] == hk)
+    split = np.zeros(len(lh.row), bool)
     for i in np.flatnonzero(occupied):
         v = pos[i]
         rows = np.arange(tex.entry_offsets[v], tex.entry_offsets[v + 1])
         n = sh.normal[lh.row[i]]
         q = plane_origin(n[None], lh.offset[i : i + 1])[0]
         same = (np.abs(sh.normal[rows] @ n) >= 0.7) & (np.abs(sh.normal[rows] @ q - sh.offset[rows]) <= 0.3)
-        assert not same.any(), i
-    assert (~occupied).mean() > 0.5
+        assert st.mask[rows[same]].all(), i
+        for r in rows[same]:
+            a, b = _band_in(lh, i, sh, st, r)
+            assert min(lh.hi[i], b) - max(lh.lo[i], a) <= 0.005, (i, r)
+            split[i] = True
+    assert split.any()
+    monkeypatch.setattr(sheet_line_halos, "SPLIT_REST", None)
+    before = sheet_layout(tex).line_halos
+    old = {(int(r), *map(int, c)) for r, c in zip(before.row, before.cell, strict=True)}
+    new = {(int(r), *map(int, c)) for r, c in zip(lh.row[~split], lh.cell[~split], strict=True)}
+    assert old == new
+
+
+def test_a_beam_split_along_a_voxel_face(monkeypatch):
+    """A beam 0.8 voxel wide along x, whose faces the grid's voxel faces
+    split down the middle: each voxel holds a strip of half a face, and a
+    ray crossing the plane in one of them counted that half of the
+    footprint alone. With a voxel a pixel, parallel rays across it against
+    its box-filtered shadow (as above): with the halos of the halves
+    (SPLIT_REST) the shadow's centre is covered (alpha at least 0.98;
+    measured 1.0) and the error over the profile is under 0.6 of that
+    without them (measured 0.028 against 0.060; the centre 0.74-0.79)."""
+    from aniso3d.rendering import sheet_line_halos, volume
+
+    assert sheet_line_halos.SPLIT_REST is not None
+    monkeypatch.setattr(volume, "STRIP_FOOT", 1.0)
+    W = 0.8
+    mesh, rot = beam(W, 0.0, 0.0)
+    tex = build_texture(mesh, 32, 16, bounds=BOUNDS)
+    c, w, u, width = across_the_beam(rot, W)
+    ds, foot = 0.05, 1.0
+    s = np.arange(-2.0, 2.0 + 1e-9, ds)
+    want = np.clip(np.minimum(s + foot / 2, width / 2) - np.maximum(s - foot / 2, -width / 2), 0, None) / foot
+    assert want.max() == 1.0
+    light = Lighting()
+    err, centre = {}, {}
+    for name in ("split", "none"):
+        if name == "none":
+            monkeypatch.setattr(sheet_line_halos, "SPLIT_REST", None)
+        layout = sheet_layout(tex)
+        got = np.array([[march_ray_np(tex, along * c + x * u - 100 * w, w, light, pixel_angle=foot / 100,
+                                      layout=layout)[1] for x in s] for along in (-4.0, 0.3, 4.1)])  # fmt: skip
+        err[name] = float(np.abs(got - want[None]).mean())
+        centre[name] = got[:, np.argmin(np.abs(s))]
+    assert np.all(centre["split"] >= 0.98), centre
+    assert err["split"] < 0.6 * err["none"], err
 
 
 @pytest.mark.parametrize("shift", [-0.5, -0.4])
@@ -132,10 +204,11 @@ def test_a_beams_alpha_across_it_with_a_voxel_a_pixel(shift, monkeypatch):
 
 
 @pytest.mark.gpu
-@pytest.mark.parametrize("yaw, pitch, shift, least", [(0.0, 0.0, -0.5, 10), (35.0, -25.0, 0.0, 4)])
+@pytest.mark.parametrize("yaw, pitch, shift, least", [(0.0, 0.0, -0.5, 10), (0.0, 0.0, 0.0, 10), (35.0, -25.0, 0.0, 4)])
 def test_twin_agrees_where_the_halos_draw(r, yaw, pitch, shift, least):
-    """The beam, along x in a column of voxels and turned off the grid,
-    with a voxel about a pixel: up to 20 pixels the halos change (against
+    """The beam, along x in a column of voxels, along x split down the
+    middle by voxel faces (its halves' halos, SPLIT_REST) and turned off
+    the grid, with a voxel about a pixel: up to 20 pixels the halos change (against
     the twin without them; at least ``least``: the turned beam's voxels
     along it mostly continue each other's planes) and 10 others partly
     covered, the GPU against march_ray_np within 1/255 (RGB and alpha)."""

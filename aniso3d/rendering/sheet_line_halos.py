@@ -16,7 +16,7 @@ A **line halo** is a copy of such an entry, with no area, in the voxel
 across one of its voxel's faces that its plane crosses, where no sheet of
 that voxel continues the plane (within ``EDGE_NEAR`` of it and
 ``EDGE_PARALLEL`` of its normal at the face: there the surface goes on and
-its own entry counts). It keeps the entry's plane and lines, moved into its
+its own entry counts; but see :data:`SPLIT_REST`). It keeps the entry's plane and lines, moved into its
 voxel's frame, and counts, where the ray crosses the plane there, the same
 share of the footprint as the entry would (:func:`line_halos`). Where the
 face's section lies past a line on the uncovered side (the line runs along
@@ -38,10 +38,23 @@ import numpy as np
 from aniso3d.grid import cell_keys, entries_at
 from aniso3d.rendering.sheet_edges import EDGE_MIN_LENGTH, EDGE_NEAR, EDGE_PARALLEL, face_segments
 from aniso3d.rendering.sheet_halfplanes import C_RANGE, decoded_offset, line_inward, offset_code, plane_origin
+from aniso3d.rendering.sheet_strips import SheetStrips
 
 #: Entry word 11's bit marking a line halo cut by its face (bits 0-2 and
 #: 4-6 hold no face for lines, bit 7 no second edge's kind).
 FACE_CUT_BIT = 7
+#: Where the plane goes on across a face as another strip, a strip of two
+#: lines has a halo all the same, carrying the part of its band that the
+#: strip across does not cover, when that part is at least this wide (voxel
+#: units, in the plane). A voxel face cutting a beam's face along its
+#: length leaves each voxel a strip of its part (a line on the voxel
+#: face), and the ray, crossing the plane in one of them, counted that
+#: part's share of the footprint alone: a beam 0.8 voxel wide split so kept
+#: 0.69 of its shadow at its centre. Where the beam goes on through the
+#: face, the strips across share its lines and nothing is left. None: the
+#: plane going on stops every halo, as before. A closed half-plane (one
+#: line) keeps that rule (docs/coverage.md, "Halos of split beams").
+SPLIT_REST: float | None = 0.05
 #: Entries whose halos are made per chunk (memory bound: (entry, face)
 #: pairs and the entries of the voxels across).
 _CHUNK = 100_000
@@ -82,7 +95,7 @@ class LineHalos:
 
 def line_halos(
     texture, sheets, rows: np.ndarray, angle: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-    one_line_reach: float = np.inf,
+    one_line_reach: float = np.inf, strips: SheetStrips | None = None, split_rest: float | None = None,
 ) -> LineHalos:  # fmt: skip
     """The :class:`LineHalos` of the entries ``rows`` of ``texture`` (its
     :class:`~aniso3d.rendering.volume.EntrySheets` ``sheets``), whose lines
@@ -90,13 +103,17 @@ def line_halos(
     ``lo`` and ``hi`` (R,; covered where ``lo <= (p - q0) . u <= hi``, hi inf
     for a half-plane). A half-plane's halo is left out where its line lies
     farther than ``one_line_reach`` (voxel units, in the plane) from the
-    halo's q0. Vectorised over (entry, face) pairs."""
+    halo's q0. ``strips``: the texture's strips (all entries'); where one of
+    them goes on with the plane, an entry of two lines has a halo of the
+    part of its band that strip leaves, at least ``split_rest`` wide
+    (:data:`SPLIT_REST`; None: never). Vectorised over (entry, face) pairs."""
     rows = np.asarray(rows, dtype=np.int64)
     if len(rows) == 0:
         return LineHalos.empty()
     if len(rows) > _CHUNK:
         parts = [line_halos(texture, sheets, rows[i : i + _CHUNK], angle[i : i + _CHUNK], lo[i : i + _CHUNK],
-                            hi[i : i + _CHUNK], one_line_reach) for i in range(0, len(rows), _CHUNK)]  # fmt: skip
+                            hi[i : i + _CHUNK], one_line_reach, strips, split_rest)
+                 for i in range(0, len(rows), _CHUNK)]  # fmt: skip
         return LineHalos(*(np.concatenate([getattr(p, f) for p in parts]) for f in LineHalos.__dataclass_fields__))
     n, d = sheets.normal[rows], sheets.offset[rows]
     length, mid = face_segments(n, d)
@@ -118,16 +135,23 @@ def line_halos(
     local = mid[r_idx[which], f_idx[which]] - step[which]
     near = np.abs(np.einsum("ek,ek->e", no, local) - sheets.offset[other]) <= EDGE_NEAR
     parallel = np.abs(np.einsum("ek,ek->e", no, nr[which])) >= EDGE_PARALLEL
-    has_plane = np.linalg.norm(no, axis=1) > 0.5
+    goes_on = near & parallel & (np.linalg.norm(no, axis=1) > 0.5)
+    u = line_inward(angle[r_idx], nr)
+    lo_s, hi_s = lo[r_idx].astype(np.float64), hi[r_idx].astype(np.float64)
+    if strips is not None and split_rest is not None:
+        # Continued by a strip: the entry of two lines keeps the part of its
+        # band that the strip across (the one covering most of it) leaves.
+        j = np.flatnonzero(goes_on & strips.mask[other] & np.isfinite(hi_s[which]))
+        goes_on[j] = False
+        lo_s, hi_s = _split_rest(sheets, strips, nr, dr, u, step, lo_s, hi_s, which[j], other[j], split_rest)
     continued = np.zeros(len(r_idx), dtype=bool)
-    np.logical_or.at(continued, which, near & parallel & has_plane)
+    np.logical_or.at(continued, which, goes_on)
     # The lines in the halo's frame: q0 moves to the plane's point nearest
     # its voxel's centre.
-    u = line_inward(angle[r_idx], nr)
     d_new = dr - np.einsum("ek,ek->e", nr, step)
     shift = np.einsum("ek,ek->e", plane_origin(nr, d_new) + step - plane_origin(nr, dr), u)
-    lo_new = lo[r_idx] - shift
-    hi_new = hi[r_idx] - shift
+    lo_new = lo_s - shift
+    hi_new = hi_s - shift
     # The near line's offset must fit its 12 bits; a far one is float32.
     fits = np.abs(lo_new) <= C_RANGE
     # A single line's halo only near it (a closed face's edge at a crease:
@@ -142,12 +166,47 @@ def line_halos(
     s_mid = np.einsum("ek,ek->e", m - plane_origin(nr, dr), u)
     spread = half * np.abs(np.einsum("ek,ek->e", seg, u))
     s0, s1 = s_mid - spread, s_mid + spread
-    below = s1 < lo[r_idx]
-    above = s0 > hi[r_idx]
+    below = s1 < lo_s
+    above = s0 > hi_s
     cut = ~(below | above)
-    keep = ~continued & fits
+    keep = ~continued & fits & (lo_s < hi_s)
     k = np.flatnonzero(keep)
     return LineHalos(
         rows[r_idx[k]], cell[k], (2 * a[k] + (1 - side[k])).astype(np.int8), d_new[k],
         decoded_offset(offset_code(lo_new[k])), hi_new[k].astype(np.float32).astype(np.float64), cut[k],
     )  # fmt: skip
+
+
+def _split_rest(sheets, strips: SheetStrips, nr, dr, u, step, lo, hi, pair, other, least: float):
+    """The bands ``[lo, hi]`` (P,; in the entries' frames, along ``u``) less
+    what the strips ``other`` of the voxels across (one row per candidate,
+    its pair ``pair``) cover of them: per pair the candidate covering most;
+    the larger piece where it leaves two; an empty band (lo >= hi) where it
+    leaves less than ``least``."""
+    lo, hi = lo.copy(), hi.copy()
+    if len(pair) == 0:
+        return lo, hi
+    no = sheets.normal[other]
+    u2 = line_inward(strips.angle[other], no)
+    # The other strip's lines in the entry's frame (its voxel is one step on).
+    q2 = plane_origin(no, sheets.offset[other]) + step[pair]
+    c = np.einsum("ek,ek->e", plane_origin(nr[pair], dr[pair]) - q2, u2)
+    a2, b2 = strips.lo[other] - c, strips.hi[other] - c
+    flip = np.einsum("ek,ek->e", u2, u[pair]) < 0.0
+    a2, b2 = np.where(flip, -b2, a2), np.where(flip, -a2, b2)
+    over = np.minimum(hi[pair], b2) - np.maximum(lo[pair], a2)
+    # The candidate covering most of each pair's band.
+    order = np.lexsort((over, pair))
+    last = np.r_[pair[order][1:] != pair[order][:-1], True]
+    best = order[last]
+    p, a2, b2, over = pair[best], a2[best], b2[best], over[best]
+    lo_p, hi_p = lo[p], hi[p]
+    low_left, high_left = np.maximum(a2 - lo_p, 0.0), np.maximum(hi_p - b2, 0.0)
+    covered = over > 0.0
+    keep_low = covered & (low_left >= high_left)
+    keep_high = covered & ~keep_low
+    hi[p] = np.where(keep_low, np.minimum(hi_p, a2), hi_p)
+    lo[p] = np.where(keep_high, np.maximum(lo_p, b2), lo_p)
+    short = hi[p] - lo[p] < least
+    hi[p[short]] = lo[p[short]]
+    return lo, hi

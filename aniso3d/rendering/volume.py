@@ -123,6 +123,7 @@ from aniso3d.build.pyramid import Pyramid
 from aniso3d.build.texture import QUANTISED, AnisoTexture
 from aniso3d.errors import InputError, ResourceError
 from aniso3d.grid import cell_coords, cell_keys
+from aniso3d.rendering import sheet_line_halos as line_halo_module
 from aniso3d.rendering.base import DrawOptions, number, option_parser
 from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.frame import DrawStats, FrameView
@@ -1286,7 +1287,7 @@ def sheet_line_halos(sheets: EntrySheets, halfplanes: SheetHalfplanes, strips: S
         return LineHalos.empty()
     rows = np.flatnonzero(strips.mask)
     return line_halos(texture, sheets, rows, strips.angle[rows], strips.lo[rows], strips.hi[rows],
-                      ONE_LINE_REACH)  # fmt: skip
+                      ONE_LINE_REACH, strips, line_halo_module.SPLIT_REST)  # fmt: skip
 
 
 def line_halo_entries(entries: np.ndarray, lh: LineHalos) -> np.ndarray:
