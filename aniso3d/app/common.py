@@ -123,7 +123,7 @@ def load_input(path: str | None, scene_options: dict | None = None, point_option
     ``point_options`` go to :meth:`~aniso3d.build.points.PointCloud.load_ply`
     and are refused for any other input."""
     from aniso3d.build import scenes
-    from aniso3d.build.mesh import load_mesh
+    from aniso3d.build.mesh import MESH_SUFFIXES, check_readable_file, load_mesh
     from aniso3d.build.points import PointCloud
     from aniso3d.build.texture import AnisoTexture
     from aniso3d.errors import InputError
@@ -141,6 +141,12 @@ def load_input(path: str | None, scene_options: dict | None = None, point_option
         return AnisoTexture.load(path)
     if suffix == ".ply" and ply_is_point_cloud(path):
         return PointCloud.load_ply(path, **(point_options or {}))
+    if suffix not in MESH_SUFFIXES:
+        check_readable_file(path, "input")
+        raise InputError(
+            f"'{Path(path).name}' has suffix '{suffix or '(none)'}', which aniso3d does not read as a mesh "
+            f"({', '.join(sorted(MESH_SUFFIXES))}), a saved texture ({TEXTURE_SUFFIX}) or a PLY point cloud"
+        )
     return load_mesh(path)
 
 
