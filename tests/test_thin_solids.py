@@ -68,6 +68,44 @@ def test_closed_faces_of_small_meshes():
     assert tube.n_faces == 8 and not tube.closed_faces().any()
 
 
+def test_holes_count_one_by_one_and_fins_are_no_holes():
+    """A closed skin's holes are measured one by one (the sum of their
+    squared lengths against HOLE_SHARE of its area), so a scan with a few
+    small holes stays closed where one opening of their total length would
+    not; an edge of three faces (a fin on a solid) is no hole: only the
+    faces beside it are open."""
+    from aniso3d.build.mesh import HOLE_SHARE
+
+    sphere = scenes.sphere()
+    t = sphere.triangles
+    c = t.mean(axis=1)
+    # Twelve triangles spread over the sphere (nearest to an icosahedron's
+    # corners), each a hole of its perimeter.
+    phi = (1 + 5**0.5) / 2
+    ico = np.array([[0, 1, phi], [0, -1, phi], [0, 1, -phi], [0, -1, -phi], [1, phi, 0], [-1, phi, 0],
+                    [1, -phi, 0], [-1, -phi, 0], [phi, 0, 1], [-phi, 0, 1], [phi, 0, -1], [-phi, 0, -1]])  # fmt: skip
+    ico = ico / np.linalg.norm(ico, axis=1, keepdims=True) * np.linalg.norm(c, axis=1).mean()
+    gone = np.unique(np.argmin(np.linalg.norm(c[None] - ico[:, None], axis=2), axis=1))
+    assert len(gone) == 12
+    per = np.linalg.norm(t[gone] - t[gone][:, [1, 2, 0]], axis=2).sum(axis=1)
+    cut = np.cross(t[gone, 1] - t[gone, 0], t[gone, 2] - t[gone, 0])
+    area = sphere.area() - 0.5 * np.linalg.norm(cut, axis=1).sum()
+    assert (per**2).sum() <= HOLE_SHARE * area < per.sum() ** 2  # closed one by one, not all together
+    holed = Mesh.from_arrays(sphere.vertices, np.delete(sphere.faces, gone, axis=0))
+    np.testing.assert_array_equal(holed.closed_sides(), 1)
+    # A fin: a triangle on one of the cube's edges (shared by three faces).
+    cube = scenes.cube()
+    e0, e1 = cube.faces[0, 0], cube.faces[0, 1]
+    far = cube.vertices[[e0, e1]].mean(axis=0) * 3.0
+    fin = Mesh.from_arrays(np.vstack([cube.vertices, far]), np.vstack([cube.faces, [[e0, e1, len(cube.vertices)]]]))
+    sides = fin.closed_sides()
+    beside = np.array([len({e0, e1} & set(f)) == 2 for f in cube.faces])
+    assert beside.sum() == 2
+    np.testing.assert_array_equal(sides[:12][beside], 0)
+    np.testing.assert_array_equal(sides[:12][~beside], 1)
+    assert sides[12] == 0
+
+
 def test_components_join_faces_that_share_edges():
     # A chain 0-1-2-...-9 and a pair 10-11, given in shuffled order: two
     # labels, the smallest node of each.

@@ -36,11 +36,14 @@ LEAST_SHININESS = 1.0
 #: far below it, any detail a texture resolves far above.
 MERGE_SHARE = 2.0**-20
 #: A consistently wound surface is taken as closed while its holes are small:
-#: the squared length of its open edges at most this share of its area (0:
-#: watertight only). A sphere with a hole of 23 degrees' radius (4 % of its
-#: area) or a head with open eye sockets passes; a bowl (pi), a box without
-#: its lid (3.2), a leaf (16) or a tube open at both ends shorter than 50
-#: times its radius (8 pi r / length) does not.
+#: the sum over its holes of each one's squared length at most this share
+#: of its area (0: watertight only). A sphere with a hole of 23 degrees'
+#: radius (4 % of its area), a head with open eye sockets or a scanned
+#: animal with a few holes in its base (the Stanford bunny: 0.47) passes; a
+#: bowl (pi), a box without its lid (3.2), a leaf (16) or a tube open at
+#: both ends shorter than 25 times its radius (4 pi r / length) does not.
+#: (Until f37f1f8 the holes' lengths were summed before squaring, and
+#: edges of three faces or more counted as holes: the bunny read 51.)
 HOLE_SHARE = 0.5
 #: Largest Phong exponent accepted; higher ones are clamped (a mirror-like lobe
 #: narrower than this is below a pixel at any size we render).
@@ -559,15 +562,22 @@ def _closed_components(v: np.ndarray, faces: np.ndarray, f: np.ndarray) -> np.nd
     pair = first[good]
     u, w = order[pair] // 3, order[pair + 1] // 3
     root = connected_components(nf, u, w)
-    # The length of a component's holes: its edges that are not shared
-    # with a neighbour walking them the other way.
+    # A component's holes: chains of its border edges (edges of one face,
+    # or walked the same way by two) joined at their corners, each the sum
+    # of its edges' lengths; its hole measure the sum of their squares. An
+    # edge of three faces or more is no hole (the faces beside it are open).
     corner = v[faces.reshape(-1)]
     length = np.linalg.norm(v[faces[:, [1, 2, 0]].reshape(-1)] - corner, axis=1)
-    hole = np.bincount(root[np.arange(len(a)) // 3], weights=np.where(good[inverse], 0.0, length), minlength=nf)
+    border = ((count == 1) | ((count == 2) & (walk != 0)))[inverse]
+    chain = connected_components(n, a[border], b[border])[a[border]]
+    comp = root[np.arange(len(a)) // 3][border]
+    pieces, piece = np.unique(comp * n + chain, return_inverse=True)
+    loop = np.bincount(piece, weights=length[border], minlength=len(pieces))
+    hole = np.bincount(pieces // n, weights=loop**2, minlength=nf)
     t = v[faces]
     area = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
     skin = np.bincount(root, weights=area, minlength=nf)
-    closed = hole**2 <= HOLE_SHARE * skin
+    closed = hole <= HOLE_SHARE * skin
     p0, p1, p2 = (v[faces[:, k]] - v.mean(axis=0) for k in range(3))
     volume = np.bincount(root, weights=np.einsum("ij,ij->i", p0, np.cross(p1, p2)), minlength=nf)
     extent = float(np.ptp(v, axis=0).max()) if len(v) else 0.0
