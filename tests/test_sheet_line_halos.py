@@ -126,6 +126,58 @@ def test_no_halo_where_the_plane_goes_on(beam_texture, monkeypatch):
     assert old == new
 
 
+def _two_strips(u_across):
+    """line_halos of one strip in voxel (5, 5, 5) on the plane z = 0.5 (voxel
+    units), its band y in [0.6, 1] (its line on the face to +y), and a strip
+    of the same plane in the voxel across that face, its lines along the
+    inward normal ``u_across``: the halos' cells and bands."""
+    import types
+
+    from aniso3d.grid import tangent_frame
+    from aniso3d.rendering.sheet_line_halos import SPLIT_REST, line_halos
+
+    shape = np.array([16, 16, 16])
+    coords = np.array([[5, 5, 5], [5, 6, 5]])
+    assert np.all(np.diff(cell_keys(coords, shape)) > 0)
+    n = np.array([[0.0, 0.0, 1.0]] * 2)
+
+    def angle(u):
+        t1, t2 = tangent_frame(n[:1])
+        return float(np.arctan2(np.asarray(u) @ t2[0], np.asarray(u) @ t1[0]))
+
+    tex = types.SimpleNamespace(coords=coords, shape=shape, entry_voxel=np.array([0, 1]),
+                                entry_offsets=np.array([0, 1, 2]))  # fmt: skip
+    sheets = types.SimpleNamespace(normal=n, offset=np.array([0.5, 0.5]))
+    # Across: y in [0, 0.3] of its voxel (s = y - 0.5), or x in [0.4, 0.6].
+    lo2, hi2 = (-0.5, -0.2) if u_across[1] else (-0.1, 0.1)
+    strips = types.SimpleNamespace(mask=np.array([True, True]), angle=np.array([angle([0, 1, 0]), angle(u_across)]),
+                                   lo=np.array([0.1, lo2]), hi=np.array([0.5, hi2]))  # fmt: skip
+    out = {}
+    for rest in (SPLIT_REST, None):
+        lh = line_halos(tex, sheets, np.array([0]), strips.angle[:1], strips.lo[:1], strips.hi[:1], np.inf, strips,
+                        rest)  # fmt: skip
+        across = np.all(lh.cell == coords[1], axis=1)
+        out[rest] = (lh.lo[across], lh.hi[across])
+    return out
+
+
+def test_a_split_halo_only_beside_the_other_part_of_its_face():
+    """Where the strip across has lines parallel to the entry's (the other
+    part of a face a voxel face splits along its length), the entry has a
+    halo there carrying its whole band (moved one voxel: y - 1.5 in [-0.9,
+    -0.5]); where its lines cross the entry's (another beam's face in the
+    same plane), none, as without SPLIT_REST."""
+    from aniso3d.rendering.sheet_line_halos import SPLIT_REST
+
+    parallel = _two_strips([0.0, 1.0, 0.0])
+    lo, hi = parallel[SPLIT_REST]
+    assert len(lo) == 1
+    np.testing.assert_allclose([lo[0], hi[0]], [-0.9, -0.5], atol=1e-3)
+    assert len(parallel[None][0]) == 0
+    crossing = _two_strips([1.0, 0.0, 0.0])
+    assert len(crossing[SPLIT_REST][0]) == 0 and len(crossing[None][0]) == 0
+
+
 def test_a_beam_split_along_a_voxel_face(monkeypatch):
     """A beam 0.8 voxel wide along x, whose faces the grid's voxel faces
     split down the middle: each voxel holds a strip of half a face, and a

@@ -55,6 +55,13 @@ FACE_CUT_BIT = 7
 #: plane going on stops every halo, as before. A closed half-plane (one
 #: line) keeps that rule (docs/coverage.md, "Halos of split beams").
 SPLIT_REST: float | None = 0.05
+#: ... where the strip across is the other part of the same face: its lines
+#: parallel to the entry's (``|u . u'|`` at least this). A strip whose lines
+#: cross the entry's (a perpendicular beam's face in the same plane, at a
+#: node of the lattice) keeps the rule: no halo (trimming the band by its
+#: extent across another axis was meaningless and counted 0.07 of the
+#: footprint twice on average where it made halos).
+SPLIT_PARALLEL = 0.98
 #: Entries whose halos are made per chunk (memory bound: (entry, face)
 #: pairs and the entries of the voxels across).
 _CHUNK = 100_000
@@ -142,6 +149,8 @@ def line_halos(
         # Continued by a strip: the entry of two lines keeps the part of its
         # band that the strip across (the one covering most of it) leaves.
         j = np.flatnonzero(goes_on & strips.mask[other] & np.isfinite(hi_s[which]))
+        u2 = line_inward(strips.angle[other[j]], sheets.normal[other[j]])
+        j = j[np.abs(np.einsum("ek,ek->e", u2, u[which[j]])) >= SPLIT_PARALLEL]
         goes_on[j] = False
         lo_s, hi_s = _split_rest(sheets, strips, nr, dr, u, step, lo_s, hi_s, which[j], other[j], split_rest)
     continued = np.zeros(len(r_idx), dtype=bool)
