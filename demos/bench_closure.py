@@ -19,12 +19,18 @@ splats are two-sided, and a face drawn twice is counted twice. Variants
   built once; still watertight skins only;
 - ``all``: the defaults, skins with small holes closed too (``HOLE_SHARE``).
 
+``--holes`` compares instead how a skin's holes are measured: ``summed``,
+as until 90240ac (:func:`summed_sides`, kept here for the comparison: the
+lengths of all its open edges, an edge of three faces or more among them,
+summed and then squared), against ``all`` (each hole's length squared,
+summed; edges of three faces no hole).
+
 Per scene and camera (the corpus bench's two): the share of faces taken as
 closed, and PSNR (dB) / FLIP against 8x8 polygons in the object's box for
 1-spp and 2x2 polygons, the volume and the high splats of each variant.
 The images are deterministic: no spread to report.
 
-    .venv/bin/python demos/bench_closure.py [tree bush ... | mesh files] [--size 512] [--md docs/coverage.md]
+    .venv/bin/python demos/bench_closure.py [tree bush ... | mesh files] [--size 512] [--holes] [--md docs/coverage.md]
 """
 
 from __future__ import annotations
@@ -57,6 +63,10 @@ BEGIN = "<!-- bench_closure: begin -->"
 END = "<!-- bench_closure: end -->"
 #: variant: HOLE_SHARE (None: the default), or None for the strict reading.
 VARIANTS = {"before": None, "corners": 0.0, "all": "default"}
+#: --holes: the hole measure until 90240ac against the default.
+HOLE_VARIANTS = {"summed": "summed", "all": "default"}
+HOLES_BEGIN = "<!-- bench_closure_holes: begin -->"
+HOLES_END = "<!-- bench_closure_holes: end -->"
 
 
 def strict_sides(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -86,18 +96,65 @@ def strict_sides(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return np.where(open_count[root] == 0, sign[root], 0).astype(np.int8)
 
 
-def set_variant(name: str, default_hole: float):
-    hole = VARIANTS[name]
-    mesh_module.HOLE_SHARE = default_hole if hole == "default" else (hole or 0.0)
+def summed_sides(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """The sides as read until 90240ac: :func:`~aniso3d.build.mesh.face_topology`
+    with a component's hole measure the squared sum of the lengths of its
+    edges not shared by two faces walking them opposite ways (edges of
+    three faces or more among them)."""
+    faces = np.asarray(faces, dtype=np.int64)
+    nf = len(faces)
+    sides = np.zeros(nf, dtype=np.int8)
+    if nf == 0:
+        return sides
+    v = np.asarray(vertices, dtype=np.float64)
+    _, repeat = mesh_module.face_topology(v, faces)
+    f_all = mesh_module.merged_vertices(v)[faces]
+    degenerate = (f_all[:, 0] == f_all[:, 1]) | (f_all[:, 1] == f_all[:, 2]) | (f_all[:, 2] == f_all[:, 0])
+    topo = np.flatnonzero(~repeat & ~degenerate)
+    if len(topo) == 0:
+        return sides
+    fc, f = faces[topo], f_all[topo]
+    n_t = len(topo)
+    a, b = f.reshape(-1), f[:, [1, 2, 0]].reshape(-1)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    _, inverse, count = np.unique(lo * (int(f.max()) + 1) + hi, return_inverse=True, return_counts=True)
+    walk = np.bincount(inverse, weights=np.where(a < b, 1.0, -1.0), minlength=len(count))
+    good = (count == 2) & (walk == 0)
+    local = (good | (count == 1))[inverse].reshape(-1, 3).all(axis=1)
+    order = np.argsort(inverse, kind="stable")
+    pair = np.concatenate([[0], np.cumsum(count)[:-1]])[good]
+    root = mesh_module.connected_components(n_t, order[pair] // 3, order[pair + 1] // 3)
+    corner = v[fc.reshape(-1)]
+    length = np.linalg.norm(v[fc[:, [1, 2, 0]].reshape(-1)] - corner, axis=1)
+    hole = np.bincount(root[np.arange(len(a)) // 3], weights=np.where(good[inverse], 0.0, length), minlength=n_t)
+    t = v[fc]
+    skin = np.bincount(root, weights=0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1),
+                       minlength=n_t)  # fmt: skip
+    closed = hole**2 <= mesh_module.HOLE_SHARE * skin
+    p0, p1, p2 = (v[fc[:, k]] - v.mean(axis=0) for k in range(3))
+    volume = np.bincount(root, weights=np.einsum("ij,ij->i", p0, np.cross(p1, p2)), minlength=n_t)
+    tiny = 1e-12 * float(np.ptp(v, axis=0).max()) ** 3
+    sign = np.where(volume > tiny, 1, np.where(volume < -tiny, -1, 0))
+    sides[topo] = np.where(local & closed[root], sign[root], 0)
+    return sides
+
+
+def set_variant(name: str, default_hole: float, variants: dict):
+    hole = variants[name]
+    mesh_module.HOLE_SHARE = default_hole if hole in ("default", "summed") else (hole or 0.0)
     if hole is None:
         mesh_stream.face_topology = lambda v, f: (strict_sides(v, f), np.zeros(len(f), bool))
+    elif hole == "summed":
+        mesh_stream.face_topology = lambda v, f: (summed_sides(v, f), mesh_module.face_topology(v, f)[1])
     else:
         mesh_stream.face_topology = mesh_module.face_topology
 
 
-def closed_share(mesh, name: str) -> float:
-    if VARIANTS[name] is None:
+def closed_share(mesh, name: str, variants: dict) -> float:
+    if variants[name] is None:
         return float(np.mean(strict_sides(mesh.vertices, mesh.faces) != 0))
+    if variants[name] == "summed":
+        return float(np.mean(summed_sides(mesh.vertices, mesh.faces) != 0))
     return float(np.mean(mesh_module.closed_sides(mesh.vertices, mesh.faces) != 0))
 
 
@@ -106,11 +163,12 @@ def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
     label = Path(name).name if Path(name).suffix else name
     default_hole = mesh_module.HOLE_SHARE
     original = mesh_stream.face_topology
+    variants = HOLE_VARIANTS if args.holes else VARIANTS
     made = {}
     try:
-        for v in VARIANTS:
-            set_variant(v, default_hole)
-            closed = closed_share(mesh, v)
+        for v in variants:
+            set_variant(v, default_hole, variants)
+            closed = closed_share(mesh, v, variants)
             tex = build_texture(mesh, args.resolution, args.directions)
             made[v] = (closed, tex, texture_points(tex, BASELINE["placement"], BASELINE["per_entry"],
                                                    BASELINE["point_normal"]))  # fmt: skip
@@ -130,11 +188,27 @@ def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
 
 
 def main() -> None:
-    args = corpus_parser(__doc__.splitlines()[0], scenes.CORPUS).parse_args()
+    ap = corpus_parser(__doc__.splitlines()[0], scenes.CORPUS)
+    ap.add_argument("--holes", action="store_true", help="compare the hole measures (summed, all)")
+    args = ap.parse_args()
     run = run_corpus_demo(args, run_scene)
-    columns = ["1 spp", "2x2", *(f"{m} {v}" for m in ("volume", "splat") for v in VARIANTS)]
-    table = [[r["scene"], r["camera"], " / ".join(f"{100 * r[f'closed {v}']:.0f}" for v in VARIANTS),
+    variants = HOLE_VARIANTS if args.holes else VARIANTS
+    columns = ["1 spp", "2x2", *(f"{m} {v}" for m in ("volume", "splat") for v in variants)]
+    table = [[r["scene"], r["camera"], " / ".join(f"{100 * r[f'closed {v}']:.1f}" for v in variants),
               *(pair(r[c]) for c in columns)] for r in run.rows]  # fmt: skip
+    if args.holes:
+        publish([
+            run.header(command("demos/bench_closure.py", args)) + " "
+            f"Texture {args.resolution}^3, K = {args.directions}, the corpus bench's points and {BASELINE['splat']} "
+            f"splats, quality \"high\"; truth {args.gt_ssaa}x{args.gt_ssaa} polygons; PSNR (dB) / FLIP inside the "
+            "object's box, as the corpus bench. closed %: the share of faces taken as a closed skin (summed / "
+            "all). summed: a skin's hole measure the squared sum of its open edges' lengths, edges of three "
+            "faces or more among them (until 90240ac); all: the sum of each hole's squared length, edges of "
+            f"three faces no hole (HOLE_SHARE {mesh_module.HOLE_SHARE:g} in both).",
+            "",
+            markdown_table(["scene", "camera", "closed %", *columns], table),
+        ], args.md, HOLES_BEGIN, HOLES_END, title="# Coverage\n\n")  # fmt: skip
+        return
     publish([
         run.header(command("demos/bench_closure.py", args)) + " "
         f"Texture {args.resolution}^3, K = {args.directions}, the corpus bench's points and {BASELINE['splat']} "
