@@ -42,7 +42,7 @@ MERGE_SHARE = 2.0**-20
 #: animal with a few holes in its base (the Stanford bunny: 0.47) passes; a
 #: bowl (pi), a box without its lid (3.2), a leaf (16) or a tube open at
 #: both ends shorter than 25 times its radius (4 pi r / length) does not.
-#: (Until f37f1f8 the holes' lengths were summed before squaring, and
+#: (Before 90240ac the holes' lengths were summed before squaring, and
 #: edges of three faces or more counted as holes: the bunny read 51.)
 HOLE_SHARE = 0.5
 #: Largest Phong exponent accepted; higher ones are clamped (a mirror-like lobe

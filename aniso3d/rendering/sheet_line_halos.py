@@ -16,8 +16,8 @@ A **line halo** is a copy of such an entry, with no area, in the voxel
 across one of its voxel's faces that its plane crosses, where no sheet of
 that voxel continues the plane (within ``EDGE_NEAR`` of it and
 ``EDGE_PARALLEL`` of its normal at the face: there the surface goes on and
-its own entry counts; but see :data:`SPLIT_REST`). It keeps the entry's plane and lines, moved into its
-voxel's frame, and counts, where the ray crosses the plane there, the same
+its own entry counts; but see :data:`SPLIT_REST`). It keeps the entry's
+plane and lines, moved into its voxel's frame, and counts, where the ray crosses the plane there, the same
 share of the footprint as the entry would (:func:`line_halos`). Where the
 face's section lies past a line on the uncovered side (the line runs along
 the face), that share is all; where the line crosses the face (the covered
