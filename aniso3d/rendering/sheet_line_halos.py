@@ -150,9 +150,10 @@ def line_halos(
         # band that the strip across (the one covering most of it) leaves.
         j = np.flatnonzero(goes_on & strips.mask[other] & np.isfinite(hi_s[which]))
         u2 = line_inward(strips.angle[other[j]], sheets.normal[other[j]])
-        j = j[np.abs(np.einsum("ek,ek->e", u2, u[which[j]])) >= SPLIT_PARALLEL]
+        along = np.abs(np.einsum("ek,ek->e", u2, u[which[j]])) >= SPLIT_PARALLEL
+        j, u2 = j[along], u2[along]
         goes_on[j] = False
-        lo_s, hi_s = _split_rest(sheets, strips, nr, dr, u, step, lo_s, hi_s, which[j], other[j], split_rest)
+        lo_s, hi_s = _split_rest(sheets, strips, nr, dr, u, step, lo_s, hi_s, which[j], other[j], u2, split_rest)
     continued = np.zeros(len(r_idx), dtype=bool)
     np.logical_or.at(continued, which, goes_on)
     # The lines in the halo's frame: q0 moves to the plane's point nearest
@@ -186,17 +187,16 @@ def line_halos(
     )  # fmt: skip
 
 
-def _split_rest(sheets, strips: SheetStrips, nr, dr, u, step, lo, hi, pair, other, least: float):
+def _split_rest(sheets, strips: SheetStrips, nr, dr, u, step, lo, hi, pair, other, u2, least: float):
     """The bands ``[lo, hi]`` (P,; in the entries' frames, along ``u``) less
     what the strips ``other`` of the voxels across (one row per candidate,
-    its pair ``pair``) cover of them: per pair the candidate covering most;
+    its pair ``pair``, its lines' inward normal ``u2``) cover of them: per pair the candidate covering most;
     the larger piece where it leaves two; an empty band (lo >= hi) where it
     leaves less than ``least``."""
     lo, hi = lo.copy(), hi.copy()
     if len(pair) == 0:
         return lo, hi
     no = sheets.normal[other]
-    u2 = line_inward(strips.angle[other], no)
     # The other strip's lines in the entry's frame (its voxel is one step on).
     q2 = plane_origin(no, sheets.offset[other]) + step[pair]
     c = np.einsum("ek,ek->e", plane_origin(nr[pair], dr[pair]) - q2, u2)

@@ -1276,7 +1276,7 @@ def _sheet_halfplanes(texture: AnisoTexture, sheets: EntrySheets) -> tuple[Sheet
     return replace(hp, mask=mask), angles
 
 
-def sheet_line_halos(sheets: EntrySheets, halfplanes: SheetHalfplanes, strips: SheetStrips, texture) -> LineHalos:
+def sheet_line_halos(sheets: EntrySheets, strips: SheetStrips, texture) -> LineHalos:
     """The :class:`~aniso3d.rendering.sheet_line_halos.LineHalos` of the
     strips (a closed surface's half-plane among them, its far line at
     infinity; :data:`LINE_HALOS`; none when off). An open surface's
@@ -1320,7 +1320,7 @@ def sheet_layout(texture: AnisoTexture) -> SheetLayout:
     order = np.argsort(keys, kind="stable")
     hp, phi = _sheet_halfplanes(texture, sheets)
     st = sheet_strips(texture, sheets, sheets.surface, _no_creases(hp, sheets), closed_sign(texture))
-    lh = sheet_line_halos(sheets, hp, st, texture)
+    lh = sheet_line_halos(sheets, st, texture)
     lkeys = cell_keys(lh.cell + GRID_PAD, pshape)
     lorder = np.argsort(lkeys, kind="stable")
     return SheetLayout(sheets, ed, keys[order], order, SheetSlopes(half(sl.shape), half(sl.kd)), hp, st, phi,
@@ -1738,7 +1738,7 @@ def pack_volume_grid(texture: AnisoTexture) -> PackedVolume:
     entries[:, 11] = np.where(strips.mask, (entries[:, 11] & 0x7F7) | near, entries[:, 11])
     entries[:, 12] = np.where(strips.mask, far, entries[:, 12])
 
-    lh = sheet_line_halos(sheets, halfplanes, strips, texture)
+    lh = sheet_line_halos(sheets, strips, texture)
 
     # The GPU grid: GRID_PAD voxels of margin (halos of edges on the outer
     # planes), the texture's voxels first, then the halos' voxels it lacks.
