@@ -300,6 +300,6 @@ def test_halos_made_in_chunks_are_the_same(beam_texture, monkeypatch):
     tex, _, layout = beam_texture
     whole = layout.line_halos
     monkeypatch.setattr(sheet_line_halos, "_CHUNK", 7)
-    chunked = layout_halos(layout.sheets, layout.halfplanes, layout.strips, tex)
+    chunked = layout_halos(layout.sheets, layout.strips, tex)
     for f in LineHalos.__dataclass_fields__:
         np.testing.assert_array_equal(getattr(chunked, f), getattr(whole, f), err_msg=f)
