@@ -631,8 +631,13 @@ def test_a_coarse_residual_is_never_worse_than_none(tree_tex, bits):
 def old_fixture(version: int):
     """The compact file ``tests/data/small_tree_v{version}.a3d`` written by
     that version's writer, and ``..._decoded.a3d`` (exact encoding), what
-    that writer's decoder gave for it: today's decoder must give exactly
-    those arrays. Returns both :class:`TextureFile`s."""
+    that writer's decoder gave for it: today's decoder must give those
+    arrays, integer ones exactly and float ones to within 4 units in the
+    last place (the areas decode through exp2 and the density sums them;
+    NumPy's vectorised exp2 differs by an ulp between builds: with 2.4.6
+    the decoded areas differ from the fixtures' by 1 ulp at most, the
+    densities by 2). Returns both
+    :class:`TextureFile`s."""
     f = read_texture_file(DATA / f"small_tree_v{version}.a3d")
     assert f.version == version and f.encoding == "compact"
     ref = read_texture_file(DATA / f"small_tree_v{version}_decoded.a3d")
@@ -640,7 +645,10 @@ def old_fixture(version: int):
     for name in ARRAYS:
         a, b = f.arrays[name], ref.arrays[name]
         assert a.dtype == b.dtype and a.shape == b.shape, name
-        np.testing.assert_array_equal(a, b, err_msg=name)
+        if np.issubdtype(a.dtype, np.floating):
+            np.testing.assert_array_max_ulp(a, b, maxulp=4)
+        else:
+            np.testing.assert_array_equal(a, b, err_msg=name)
     return f, ref
 
 
