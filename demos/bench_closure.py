@@ -25,12 +25,20 @@ lengths of all its open edges, an edge of three faces or more among them,
 summed and then squared), against ``all`` (each hole's length squared,
 summed; edges of three faces no hole).
 
+``--fins`` compares how faces beside an edge of three faces or more are
+read: ``fins open``, as until the rule of docs/coverage.md "Edges of three
+faces" (:func:`fins_open_sides`: such faces open, the rest of their
+components signed by their own signed volume), against ``all`` (such faces
+kept in their components; a component beside such an edge signed by what
+the outside sees of it, :mod:`aniso3d.build.outside`).
+
 Per scene and camera (the corpus bench's two): the share of faces taken as
 closed, and PSNR (dB) / FLIP against 8x8 polygons in the object's box for
 1-spp and 2x2 polygons, the volume and the high splats of each variant.
 The images are deterministic: no spread to report.
 
-    .venv/bin/python demos/bench_closure.py [tree bush ... | mesh files] [--size 512] [--holes] [--md docs/coverage.md]
+    .venv/bin/python demos/bench_closure.py [tree bush ... | mesh files] [--size 512] [--holes | --fins]
+        [--md docs/coverage.md]
 """
 
 from __future__ import annotations
@@ -65,6 +73,10 @@ END = "<!-- bench_closure: end -->"
 VARIANTS = {"before": None, "corners": 0.0, "all": "default"}
 #: --holes: the hole measure until 90240ac against the default.
 HOLE_VARIANTS = {"summed": "summed", "all": "default"}
+#: --fins: faces beside edges of three faces open (before) against the default.
+FIN_VARIANTS = {"fins open": "fins", "all": "default"}
+FINS_BEGIN = "<!-- bench_closure_fins: begin -->"
+FINS_END = "<!-- bench_closure_fins: end -->"
 HOLES_BEGIN = "<!-- bench_closure_holes: begin -->"
 HOLES_END = "<!-- bench_closure_holes: end -->"
 
@@ -139,13 +151,46 @@ def summed_sides(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return sides
 
 
+def fins_open_sides(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """The sides as read before the rule of "Edges of three faces": a face
+    beside an edge of three faces or more open, and every component signed
+    by its own signed volume (the default's reading with its outside test
+    replaced by that sign, and those faces opened)."""
+    faces = np.asarray(faces, dtype=np.int64)
+    v = np.asarray(vertices, dtype=np.float64)
+
+    def volume_sign(v, fc, f, root, patches, whole=None):
+        p0, p1, p2 = (v[fc[:, k]] - v.mean(axis=0) for k in range(3))
+        vol = np.bincount(root, weights=np.einsum("ij,ij->i", p0, np.cross(p1, p2)), minlength=len(fc))
+        tiny = 1e-12 * float(np.ptp(v, axis=0).max()) ** 3
+        return np.where(vol > tiny, 1, np.where(vol < -tiny, -1, 0))[patches]
+
+    original = mesh_module.outside_sides
+    mesh_module.outside_sides = volume_sign
+    try:
+        sides, repeat = mesh_module.face_topology(v, faces)
+    finally:
+        mesh_module.outside_sides = original
+    f = mesh_module.merged_vertices(v)[faces]
+    topo = np.flatnonzero(~repeat & (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 2] != f[:, 0]))
+    if len(topo):
+        ft = f[topo]
+        a, b = ft.reshape(-1), ft[:, [1, 2, 0]].reshape(-1)
+        key = np.minimum(a, b) * (int(ft.max()) + 1) + np.maximum(a, b)
+        _, inverse, count = np.unique(key, return_inverse=True, return_counts=True)
+        sides[topo[(count > 2)[inverse].reshape(-1, 3).any(axis=1)]] = 0
+    return sides
+
+
 def set_variant(name: str, default_hole: float, variants: dict):
     hole = variants[name]
-    mesh_module.HOLE_SHARE = default_hole if hole in ("default", "summed") else (hole or 0.0)
+    mesh_module.HOLE_SHARE = default_hole if hole in ("default", "summed", "fins") else (hole or 0.0)
     if hole is None:
         mesh_stream.face_topology = lambda v, f: (strict_sides(v, f), np.zeros(len(f), bool))
     elif hole == "summed":
         mesh_stream.face_topology = lambda v, f: (summed_sides(v, f), mesh_module.face_topology(v, f)[1])
+    elif hole == "fins":
+        mesh_stream.face_topology = lambda v, f: (fins_open_sides(v, f), mesh_module.face_topology(v, f)[1])
     else:
         mesh_stream.face_topology = mesh_module.face_topology
 
@@ -155,7 +200,13 @@ def closed_share(mesh, name: str, variants: dict) -> float:
         return float(np.mean(strict_sides(mesh.vertices, mesh.faces) != 0))
     if variants[name] == "summed":
         return float(np.mean(summed_sides(mesh.vertices, mesh.faces) != 0))
+    if variants[name] == "fins":
+        return float(np.mean(fins_open_sides(mesh.vertices, mesh.faces) != 0))
     return float(np.mean(mesh_module.closed_sides(mesh.vertices, mesh.faces) != 0))
+
+
+def pick_variants(args) -> dict:
+    return FIN_VARIANTS if args.fins else HOLE_VARIANTS if args.holes else VARIANTS
 
 
 def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
@@ -163,7 +214,7 @@ def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
     label = Path(name).name if Path(name).suffix else name
     default_hole = mesh_module.HOLE_SHARE
     original = mesh_stream.face_topology
-    variants = HOLE_VARIANTS if args.holes else VARIANTS
+    variants = pick_variants(args)
     made = {}
     try:
         for v in variants:
@@ -190,12 +241,26 @@ def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
 def main() -> None:
     ap = corpus_parser(__doc__.splitlines()[0], scenes.CORPUS)
     ap.add_argument("--holes", action="store_true", help="compare the hole measures (summed, all)")
+    ap.add_argument("--fins", action="store_true", help="compare the readings of edges of three faces (fins open, all)")
     args = ap.parse_args()
     run = run_corpus_demo(args, run_scene)
-    variants = HOLE_VARIANTS if args.holes else VARIANTS
+    variants = pick_variants(args)
     columns = ["1 spp", "2x2", *(f"{m} {v}" for m in ("volume", "splat") for v in variants)]
     table = [[r["scene"], r["camera"], " / ".join(f"{100 * r[f'closed {v}']:.1f}" for v in variants),
               *(pair(r[c]) for c in columns)] for r in run.rows]  # fmt: skip
+    if args.fins:
+        publish([
+            run.header(command("demos/bench_closure.py", args)) + " "
+            f"Texture {args.resolution}^3, K = {args.directions}, the corpus bench's points and {BASELINE['splat']} "
+            f"splats, quality \"high\"; truth {args.gt_ssaa}x{args.gt_ssaa} polygons; PSNR (dB) / FLIP inside the "
+            "object's box, as the corpus bench. closed %: the share of faces taken as a closed skin (fins open / "
+            "all). fins open: a face beside an edge of three faces or more open, each component signed by its "
+            "own signed volume (before); all: such faces kept in their components, a component beside such an "
+            "edge signed by what the outside sees of it (aniso3d.build.outside).",
+            "",
+            markdown_table(["scene", "camera", "closed %", *columns], table),
+        ], args.md, FINS_BEGIN, FINS_END, title="# Coverage\n\n")  # fmt: skip
+        return
     if args.holes:
         publish([
             run.header(command("demos/bench_closure.py", args)) + " "

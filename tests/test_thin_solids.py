@@ -72,8 +72,9 @@ def test_holes_count_one_by_one_and_fins_are_no_holes():
     """A closed skin's holes are measured one by one (the sum of their
     squared lengths against HOLE_SHARE of its area), so a scan with a few
     small holes stays closed where one opening of their total length would
-    not; an edge of three faces (a fin on a solid) is no hole: only the
-    faces beside it are open."""
+    not; an edge of three faces (a fin on a solid) is no hole, and the
+    solid's faces beside it stay closed, wound as their skin is; the fin,
+    a sheet, is open."""
     from aniso3d.build.mesh import HOLE_SHARE
 
     sphere = scenes.sphere()
@@ -101,9 +102,46 @@ def test_holes_count_one_by_one_and_fins_are_no_holes():
     sides = fin.closed_sides()
     beside = np.array([len({e0, e1} & set(f)) == 2 for f in cube.faces])
     assert beside.sum() == 2
-    np.testing.assert_array_equal(sides[:12][beside], 0)
-    np.testing.assert_array_equal(sides[:12][~beside], 1)
+    np.testing.assert_array_equal(sides[:12], 1)
     assert sides[12] == 0
+    # Turned inside out, the cube's faces beside the fin turn with it.
+    inside_out = Mesh.from_arrays(fin.vertices, np.vstack([cube.faces[:, ::-1], fin.faces[12:]]))
+    np.testing.assert_array_equal(inside_out.closed_sides(), [-1] * 12 + [0])
+
+
+def test_walls_meeting_floors_read_by_what_the_outside_sees():
+    """Two boxes stacked with a shared floor plate drawn once (a building's
+    storeys): the plate's edges are shared by three faces, so each box and
+    the plate are patches, none closed by itself. The boxes' walls read
+    closed, wound as the outside sees them (turned inside out, the other
+    way); the plate, inside, sees the outside from neither side and is
+    open. (The sign of each patch's own signed volume, which a patch does
+    not have, would decide nothing.)"""
+    cube = scenes.cube()
+    v, f = cube.vertices, cube.faces
+    top = v[:, 2].max()
+    lid = np.all(np.isclose(v[f][:, :, 2], top), axis=1)
+    assert lid.sum() == 2
+    upper_v = v + np.array([0.0, 0.0, top - v[:, 2].min()])
+    # The upper box shares the lower's lid as its floor: the lower box's
+    # vertices at the lid's height are the upper's at its bottom.
+    n = len(v)
+    remap = np.arange(n) + n
+    low = np.isclose(upper_v[:, 2], top)
+    match = np.array([np.flatnonzero(np.all(np.isclose(v, p), axis=1))[0] for p in upper_v[low]])
+    remap[np.flatnonzero(low)] = match
+    upper_f = remap[f]
+    upper_floor = np.all(np.isin(upper_f, match), axis=1)
+    assert upper_floor.sum() == 2
+    both = Mesh.from_arrays(np.vstack([v, upper_v]), np.vstack([f, upper_f[~upper_floor]]))
+    plate = np.all(np.isclose(both.vertices[both.faces][:, :, 2], top), axis=1)
+    assert plate.sum() == 2
+    sides = both.closed_sides()
+    np.testing.assert_array_equal(sides[~plate], 1)
+    np.testing.assert_array_equal(sides[plate], 0)
+    flipped = Mesh.from_arrays(both.vertices, both.faces[:, ::-1]).closed_sides()
+    np.testing.assert_array_equal(flipped[~plate], -1)
+    np.testing.assert_array_equal(flipped[plate], 0)
 
 
 def test_components_join_faces_that_share_edges():

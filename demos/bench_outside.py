@@ -1,0 +1,76 @@
+"""What reading patches by the outside costs (aniso3d/build/outside.py).
+
+A street of N x N two-storey buildings: two boxes each, the upper standing
+on the lower's lid, drawn once (its edges shared by three faces), so every
+building is three patches. Times ``closed_sides`` (the topology a build
+reads first) with the outside test and with it replaced by "open", over
+several runs, and prints the closed shares: the buildings' walls +1, the
+floor plates between the storeys 0.
+
+    .venv/bin/python demos/bench_outside.py [--n 40] [--runs 5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import numpy as np
+
+import aniso3d.build.mesh as mesh_module
+from aniso3d.build import scenes
+
+
+def building() -> tuple[np.ndarray, np.ndarray]:
+    """Two unit boxes stacked, the upper without its floor (the lower's lid)."""
+    cube = scenes.cube()
+    v, f = cube.vertices, cube.faces
+    top = v[:, 2].max()
+    upper = v + np.array([0.0, 0.0, top - v[:, 2].min()])
+    n = len(v)
+    remap = np.arange(n) + n
+    low = np.flatnonzero(np.isclose(upper[:, 2], top))
+    same = np.array([np.flatnonzero(np.all(np.isclose(v, p), axis=1))[0] for p in upper[low]])
+    remap[low] = same
+    upper_faces = remap[f]
+    floor = np.all(np.isin(upper_faces, same), axis=1)
+    return np.vstack([v, upper]), np.vstack([f, upper_faces[~floor]])
+
+
+def street(n: int) -> tuple[np.ndarray, np.ndarray]:
+    bv, bf = building()
+    step = float(np.ptp(bv, axis=0).max()) * 1.5
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    shift = np.stack([i.ravel() * step, j.ravel() * step, np.zeros(n * n)], axis=1)
+    v = (bv[None] + shift[:, None]).reshape(-1, 3)
+    f = (bf[None] + (np.arange(n * n) * len(bv))[:, None, None]).reshape(-1, 3)
+    return v, f
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, default=40, help="buildings along each side of the street grid")
+    ap.add_argument("--runs", type=int, default=5)
+    args = ap.parse_args()
+    v, f = street(args.n)
+    print(f"{args.n * args.n} buildings, {len(f)} faces; load average {os.getloadavg()} at the start")
+    original = mesh_module.outside_sides
+    for name, fn in (("outside", original), ("open", lambda *a: np.zeros(len(a[4]), np.int8))):
+        mesh_module.outside_sides = fn
+        try:
+            times = []
+            for _ in range(args.runs):
+                t0 = time.perf_counter()
+                sides = mesh_module.closed_sides(v, f)
+                times.append(time.perf_counter() - t0)
+        finally:
+            mesh_module.outside_sides = original
+        t = np.sort(times)
+        shares = {int(k): int(c) for k, c in zip(*np.unique(sides, return_counts=True), strict=True)}
+        print(f"{name:8s} median {np.median(t):.3f} s [{t[0]:.3f}-{t[-1]:.3f}], sides {shares}")
+    print(f"load average {os.getloadavg()} at the end")
+
+
+if __name__ == "__main__":
+    main()
