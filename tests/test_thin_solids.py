@@ -109,19 +109,12 @@ def test_holes_count_one_by_one_and_fins_are_no_holes():
     np.testing.assert_array_equal(inside_out.closed_sides(), [-1] * 12 + [0])
 
 
-def test_walls_meeting_floors_read_by_what_the_outside_sees():
-    """Two boxes stacked with a shared floor plate drawn once (a building's
-    storeys): the plate's edges are shared by three faces, so each box and
-    the plate are patches, none closed by itself. The boxes' walls read
-    closed, wound as the outside sees them (turned inside out, the other
-    way); the plate, inside, sees the outside from neither side and is
-    open. (The sign of each patch's own signed volume, which a patch does
-    not have, would decide nothing.)"""
+def stacked_boxes() -> tuple[Mesh, np.ndarray]:
+    """Two unit boxes stacked with a shared floor plate drawn once (a
+    building's storeys), and which of its faces are the plate."""
     cube = scenes.cube()
     v, f = cube.vertices, cube.faces
     top = v[:, 2].max()
-    lid = np.all(np.isclose(v[f][:, :, 2], top), axis=1)
-    assert lid.sum() == 2
     upper_v = v + np.array([0.0, 0.0, top - v[:, 2].min()])
     # The upper box shares the lower's lid as its floor: the lower box's
     # vertices at the lid's height are the upper's at its bottom.
@@ -136,12 +129,45 @@ def test_walls_meeting_floors_read_by_what_the_outside_sees():
     both = Mesh.from_arrays(np.vstack([v, upper_v]), np.vstack([f, upper_f[~upper_floor]]))
     plate = np.all(np.isclose(both.vertices[both.faces][:, :, 2], top), axis=1)
     assert plate.sum() == 2
-    sides = both.closed_sides()
-    np.testing.assert_array_equal(sides[~plate], 1)
-    np.testing.assert_array_equal(sides[plate], 0)
-    flipped = Mesh.from_arrays(both.vertices, both.faces[:, ::-1]).closed_sides()
-    np.testing.assert_array_equal(flipped[~plate], -1)
-    np.testing.assert_array_equal(flipped[plate], 0)
+    return both, plate
+
+
+def test_walls_meeting_floors_read_by_what_the_outside_sees():
+    """Two boxes stacked on a shared floor plate: the plate's edges are
+    shared by three faces, so each box and the plate are patches, none
+    closed by itself. The boxes' walls read closed, wound as the outside
+    sees them (turned inside out, the other way); the plate, inside, sees
+    the outside from neither side and is open. With unused vertices far
+    above (a file's stray points), the upper box's own signed volume, taken
+    about the vertices' mean, is negative: a patch encloses nothing, and
+    only the rays read it right."""
+    both, plate = stacked_boxes()
+    for stray in (np.zeros((0, 3)), np.tile([0.0, 0.0, 100.0], (50, 1))):
+        mesh = Mesh.from_arrays(np.vstack([both.vertices, stray]), both.faces)
+        sides = mesh.closed_sides()
+        np.testing.assert_array_equal(sides[~plate], 1)
+        np.testing.assert_array_equal(sides[plate], 0)
+        flipped = Mesh.from_arrays(mesh.vertices, mesh.faces[:, ::-1]).closed_sides()
+        np.testing.assert_array_equal(flipped[~plate], -1)
+        np.testing.assert_array_equal(flipped[plate], 0)
+
+
+def test_a_building_inside_another_reads_its_own_outside():
+    """The stacked boxes inside a large copy of themselves turned inside out
+    (a hall around a model, itself built of patches): rays from each
+    building's patches meet only the faces of its own whole, so the small
+    one's walls read closed, +1, and the hall's -1, though every ray from
+    the small one meets the hall."""
+    both, plate = stacked_boxes()
+    v, f = both.vertices, both.faces
+    mid = 0.5 * (v.min(axis=0) + v.max(axis=0))
+    hall = (v - mid) * 20.0 + mid
+    mesh = Mesh.from_arrays(np.vstack([v, hall]), np.vstack([f, f[:, ::-1] + len(v)]))
+    sides = mesh.closed_sides()
+    walls = np.r_[~plate, ~plate]
+    np.testing.assert_array_equal(sides[: len(f)][~plate], 1)
+    np.testing.assert_array_equal(sides[len(f) :][~plate], -1)
+    np.testing.assert_array_equal(sides[~walls], 0)
 
 
 def test_components_join_faces_that_share_edges():
@@ -412,3 +438,18 @@ def test_twin_agrees_on_a_thin_beam():
         )
         got = img[y, x]
         assert np.abs(rgb - got[:3]).max() < 1 / 255 and abs(alpha - got[3]) < 1 / 255, (y, x, rgb, alpha, got)
+
+
+def test_patches_past_the_budget_stay_open(monkeypatch):
+    """Beyond OUTSIDE_PATCHES patches (or OUTSIDE_FACES faces in their
+    wholes) no rays are cast and the patches read open, as before the rule:
+    a bounded cost, never a wrong side."""
+    import aniso3d.build.mesh as mesh_module
+
+    both, plate = stacked_boxes()
+    np.testing.assert_array_equal(both.closed_sides()[~plate], 1)
+    monkeypatch.setattr(mesh_module, "OUTSIDE_PATCHES", 2)
+    np.testing.assert_array_equal(both.closed_sides(), 0)
+    monkeypatch.setattr(mesh_module, "OUTSIDE_PATCHES", 1 << 17)
+    monkeypatch.setattr(mesh_module, "OUTSIDE_FACES", 10)
+    np.testing.assert_array_equal(both.closed_sides(), 0)

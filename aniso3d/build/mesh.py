@@ -46,6 +46,13 @@ MERGE_SHARE = 2.0**-20
 #: (Before 90240ac the holes' lengths were summed before squaring, and
 #: edges of three faces or more counted as holes: the bunny read 51.)
 HOLE_SHARE = 0.5
+#: Patches (closed components ending at edges of three faces or more) are
+#: signed by rays (:mod:`aniso3d.build.outside`) while a mesh has at most
+#: this many of them, and their wholes at most this many faces; beyond,
+#: they are open, as every such face was before the rays (their cost then
+#: would outgrow the build's).
+OUTSIDE_PATCHES = 1 << 17
+OUTSIDE_FACES = 1 << 21
 #: Largest Phong exponent accepted; higher ones are clamped (a mirror-like lobe
 #: narrower than this is below a pixel at any size we render).
 MAX_SHININESS = 1.0e4
@@ -590,19 +597,31 @@ def _closed_components(v: np.ndarray, faces: np.ndarray, f: np.ndarray) -> np.nd
     extent = float(np.ptp(v, axis=0).max()) if len(v) else 0.0
     tiny = 1e-12 * extent**3
     sign = np.where(volume > tiny, 1, np.where(volume < -tiny, -1, 0))
-    # A component beside an edge of three faces or more is a patch of a
-    # larger whole (a wall, a floor, a lid, a fin): its own signed volume
-    # says nothing of its side, what the outside sees of it does.
-    # Its outside is that of the whole its patches make, joined by such
-    # edges (a building's walls and floors): rays meet only that whole's
-    # faces, not the next building's nor a scan's stand.
-    patches = np.unique(root[(count > 2)[inverse].reshape(-1, 3).any(axis=1)])
-    if len(patches):
-        ranked = inverse[order]
-        link = (ranked[:-1] == ranked[1:]) & (count[ranked[:-1]] > 2)
-        whole = connected_components(nf, root[order[:-1][link] // 3], root[order[1:][link] // 3])[root]
-        part = np.isin(root, patches)
-        sign[patches] = outside_sides(v, faces[part], f[part], root[part], patches, whole[part])
+    # A closed component that ends at an edge of three faces or more (one
+    # of its faces there, or three) is a patch of a larger whole (a wall, a
+    # floor, a lid): enclosing nothing, its own signed volume says nothing
+    # of its side; what the outside sees of it does. (A skin that goes on
+    # across such an edge, a scan under a fin, is closed by itself.) Its
+    # outside is that of the whole its patches make, joined by such edges:
+    # rays meet only that whole's faces, not the next building's.
+    ranked = inverse[order]
+    many = count[ranked] > 2
+    if many.any():
+        # Per (edge, component) the number of the component's faces there.
+        e, c = ranked[many], root[order[many] // 3]
+        key = np.unique(e * nf + c, return_counts=True)
+        ends = np.unique(key[0][key[1] % 2 == 1] % nf)
+        patches = ends[closed[ends]]
+        if 0 < len(patches) <= OUTSIDE_PATCHES:
+            link = (ranked[:-1] == ranked[1:]) & (count[ranked[:-1]] > 2)
+            whole = connected_components(nf, root[order[:-1][link] // 3], root[order[1:][link] // 3])[root]
+            part = np.isin(whole, whole[np.isin(root, patches)])
+            if np.count_nonzero(part) <= OUTSIDE_FACES:
+                sign[patches] = outside_sides(v, faces[part], f[part], root[part], patches, whole[part])
+            else:
+                sign[patches] = 0
+        else:
+            sign[patches] = 0
     return np.where(local & closed[root], sign[root], 0).astype(np.int8)
 
 

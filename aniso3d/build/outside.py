@@ -30,8 +30,8 @@ import numpy as np
 
 #: Faces per patch whose centroids cast rays (its largest)...
 SAMPLE_FACES = 32
-#: ... and in all, at least one a patch: the rays a mesh casts are bounded
-#: (a model of a million faces in 100,000 patches casts 2.1 million).
+#: ... and in all, at least one a patch (:data:`~aniso3d.build.mesh.OUTSIDE_PATCHES`
+#: bounds the patches): at most 2^17 points, 2^21 rays.
 SAMPLE_BUDGET = 1 << 17
 
 #: Ray directions per test point, before normalising: spread over the
@@ -63,6 +63,10 @@ PAIR_BATCH = 1 << 21
 #: At most this many columns per axis of a cast's grid.
 COLUMN_CELLS = 1024
 
+#: A cast's columns are made coarser until its faces' copies into them
+#: are at most this many per face (bounds its memory).
+COLUMN_COPIES = 8
+
 #: Bits of a face's far end along the ray in a cast's sort key (a coarse,
 #: conservative cut of the faces behind a point; the exact test follows).
 X_BITS = 16
@@ -88,9 +92,13 @@ def outside_sides(vertices: np.ndarray, faces: np.ndarray, ids: np.ndarray, patc
     # One position per merged id (the first vertex holding it).
     first = np.full(int(ids.max()) + 1, -1, dtype=np.int64)
     first[ids.reshape(-1)[::-1]] = faces.reshape(-1)[::-1]
-    pos = v[first] - v.min(axis=0)
     whole = np.zeros(len(faces), np.int64) if whole is None else np.unique(whole, return_inverse=True)[1]
-    extent = float(np.ptp(v, axis=0).max())
+    used = v[first[first >= 0]]
+    lo = used.min(axis=0)
+    extent = float(np.ptp(used, axis=0).max())
+    if not np.isfinite(extent) or not extent > 0.0:
+        return out
+    pos = (v[first] - lo) / extent  # the whole mesh within the unit cube: no overflow
     tri = pos[ids]
     cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     area = np.linalg.norm(cross, axis=1)
@@ -102,11 +110,20 @@ def outside_sides(vertices: np.ndarray, faces: np.ndarray, ids: np.ndarray, patc
     mine = mine[order]
     rank = np.arange(len(mine)) - np.searchsorted(slot[patch[mine]], slot[patch[mine]], side="left")
     mine = mine[rank < int(np.clip(SAMPLE_BUDGET // len(wanted), 1, SAMPLE_FACES))]
-    if len(mine) == 0 or not extent > 0.0:
+    if len(mine) == 0:
         return out
     normal = cross[mine] / area[mine, None]
     centroid = tri[mine].mean(axis=1)
-    eps = OFFSET_SHARE * extent
+    # The offset scales with the extent of each point's whole (a wall a
+    # thousandth of its building thick stays thicker than it, however far
+    # the next building).
+    corners = tri.reshape(-1, 3)
+    owner = np.repeat(whole, 3)
+    wlo = np.full((int(whole.max()) + 1, 3), np.inf)
+    whi = np.full((int(whole.max()) + 1, 3), -np.inf)
+    np.minimum.at(wlo, owner, corners)
+    np.maximum.at(whi, owner, corners)
+    eps = OFFSET_SHARE * (whi - wlo).max(axis=1)[whole[mine], None]
     weight = area[mine]
     seen = np.zeros((2, len(wanted)))
     tried = np.zeros((2, len(wanted)))
@@ -151,10 +168,17 @@ class _Caster:
         ext = (yz.max(axis=1) - yz.min(axis=1)).max(axis=1)
         typical = float(np.median(ext)) if len(ext) else 0.0
         width = float((hi - self.lo)[1:].max())
-        self.cells = int(np.clip(width / typical if typical > 0 else 1, 1, COLUMN_CELLS))
-        self.step = np.maximum((hi - self.lo)[1:] / self.cells, 1e-300)
-        c0, c1 = self._column(yz.min(axis=1)), self._column(yz.max(axis=1))
-        span = c1 - c0 + 1
+        cells = int(np.clip(width / typical if typical > 0 else 1, 1, COLUMN_CELLS))
+        # Coarser columns where long faces (a fan of slivers across a CAD
+        # part's flat face) would copy themselves into too many of them.
+        while True:
+            self.cells = cells
+            self.step = np.maximum((hi - self.lo)[1:] / self.cells, 1e-300)
+            c0, c1 = self._column(yz.min(axis=1)), self._column(yz.max(axis=1))
+            span = c1 - c0 + 1
+            if cells == 1 or int((span[:, 0] * span[:, 1]).sum()) <= COLUMN_COPIES * len(span) + (1 << 16):
+                break
+            cells = max(1, cells // 2)
         owner, k = _expand(span[:, 0] * span[:, 1])
         col = (self.whole[owner] * self.cells + c0[owner, 0] + k % span[owner, 0]) * self.cells + (
             c0[owner, 1] + k // span[owner, 0]
@@ -245,20 +269,29 @@ class _Caster:
         hi_f = np.searchsorted(fk, col + (1 << X_BITS), "left")
         lo_b = np.searchsorted(bk, col, "left")
         hi_b = np.searchsorted(bk, col + np.clip(np.ceil(xs), 0, top).astype(np.int64), "right")
-        start = np.where(forward, lo_f, lo_b)
+        # Candidates nearest first (by their far end ahead, their near end
+        # behind), in rounds of 1, 2, 4, ... per ray: a ray stops at its
+        # first hit, as most rays into a solid do within a few.
         many = np.where(forward, hi_f - lo_f, hi_b - lo_b)
-        bounds = np.concatenate([[0], np.cumsum(many)])
-        a = 0
-        while a < n:
-            b = max(int(np.searchsorted(bounds, bounds[a] + PAIR_BATCH, side="right")) - 1, a + 1)
-            row, k = _expand(many[a:b])
-            who = a + row
-            fw = forward[who]
-            j = np.where(fw, self.owners[0][np.minimum(start[who] + k, len(fk) - 1)],
-                         self.owners[1][np.minimum(start[who] + k, len(bk) - 1)])  # fmt: skip
-            met = self.meets(p[who], j, fw)
-            hit[np.unique(who[met])] = True
-            a = b
+        done, width = 0, 1
+        active = np.flatnonzero(many > 0)
+        while len(active):
+            m = np.minimum(many[active] - done, width)
+            ends = np.cumsum(m)
+            a = 0
+            while a < len(active):
+                b = max(int(np.searchsorted(ends, (ends[a - 1] if a else 0) + PAIR_BATCH, side="right")), a + 1)
+                row, k = _expand(m[a:b])
+                who = active[a + row]
+                kk = done + k
+                fw = forward[who]
+                j = np.where(fw, self.owners[0][np.minimum(lo_f[who] + kk, len(fk) - 1)],
+                             self.owners[1][np.clip(hi_b[who] - 1 - kk, 0, len(bk) - 1)])  # fmt: skip
+                hit[who[self.meets(p[who], j, fw)]] = True
+                a = b
+            done += width
+            width *= 2
+            active = active[~hit[active] & (many[active] > done)]
         return ~hit
 
 
