@@ -453,3 +453,13 @@ def test_patches_past_the_budget_stay_open(monkeypatch):
     monkeypatch.setattr(mesh_module, "OUTSIDE_PATCHES", 1 << 17)
     monkeypatch.setattr(mesh_module, "OUTSIDE_FACES", 10)
     np.testing.assert_array_equal(both.closed_sides(), 0)
+
+
+@pytest.mark.parametrize("scale", [1e-20, 1e-3, 1e3, 1e20])
+def test_patches_read_alike_at_any_scale(scale):
+    """The rays' points and offsets are relative to the mesh's extent and
+    each whole's: the stacked boxes read the same from 1e-20 to 1e20."""
+    both, plate = stacked_boxes()
+    sides = Mesh.from_arrays(both.vertices * scale, both.faces).closed_sides()
+    np.testing.assert_array_equal(sides[~plate], 1)
+    np.testing.assert_array_equal(sides[plate], 0)
