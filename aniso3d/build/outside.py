@@ -2,10 +2,12 @@
 
 Modelling tools build solids of patches that meet three or more to an
 edge: a building's walls meet its floors, a box's lid is a separate piece
-whose edges its walls share, a fin sits on a scan. Such a patch is no
-closed surface by itself, so the sign of its own signed volume says
-nothing of which way it faces; whether it is a solid's skin, a sheet in
-the open or a wall inside is a question of what the outside sees of it.
+whose edges its walls share. Such a patch (a closed component of the
+mesh's topology that ends at such an edge,
+:func:`~aniso3d.build.mesh.face_topology`) is no closed surface by itself,
+so the sign of its own signed volume says nothing of which way it faces;
+whether it is a solid's skin or a wall inside is a question of what the
+outside sees of it.
 
 So points just off a patch's faces on either side (the centroids of up to
 :data:`SAMPLE_FACES` of its largest faces, fewer when a mesh has more
