@@ -101,10 +101,7 @@ def strict_sides(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     pair = np.concatenate([[0], np.cumsum(count)[:-1]])[count == 2]
     root = mesh_module.connected_components(nf, order[pair] // 3, order[pair + 1] // 3)
     open_count = np.bincount(root, weights=(~local.reshape(-1, 3).all(axis=1)).astype(np.float64), minlength=nf)
-    p0, p1, p2 = (v[faces[:, k]] - v.mean(axis=0) for k in range(3))
-    volume = np.bincount(root, weights=np.einsum("ij,ij->i", p0, np.cross(p1, p2)), minlength=nf)
-    tiny = 1e-12 * float(np.ptp(v, axis=0).max()) ** 3
-    sign = np.where(volume > tiny, 1, np.where(volume < -tiny, -1, 0))
+    sign = mesh_module.volume_signs(v, faces, root, nf)
     return np.where(open_count[root] == 0, sign[root], 0).astype(np.int8)
 
 
@@ -143,10 +140,7 @@ def summed_sides(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     skin = np.bincount(root, weights=0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1),
                        minlength=n_t)  # fmt: skip
     closed = hole**2 <= mesh_module.HOLE_SHARE * skin
-    p0, p1, p2 = (v[fc[:, k]] - v.mean(axis=0) for k in range(3))
-    volume = np.bincount(root, weights=np.einsum("ij,ij->i", p0, np.cross(p1, p2)), minlength=n_t)
-    tiny = 1e-12 * float(np.ptp(v, axis=0).max()) ** 3
-    sign = np.where(volume > tiny, 1, np.where(volume < -tiny, -1, 0))
+    sign = mesh_module.volume_signs(v, fc, root, n_t)
     sides[topo] = np.where(local & closed[root], sign[root], 0)
     return sides
 
@@ -160,10 +154,7 @@ def fins_open_sides(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     v = np.asarray(vertices, dtype=np.float64)
 
     def volume_sign(v, fc, f, root, patches, whole=None):
-        p0, p1, p2 = (v[fc[:, k]] - v.mean(axis=0) for k in range(3))
-        vol = np.bincount(root, weights=np.einsum("ij,ij->i", p0, np.cross(p1, p2)), minlength=len(fc))
-        tiny = 1e-12 * float(np.ptp(v, axis=0).max()) ** 3
-        return np.where(vol > tiny, 1, np.where(vol < -tiny, -1, 0))[patches]
+        return mesh_module.volume_signs(v, fc, root, int(root.max()) + 1)[patches]
 
     original = mesh_module.outside_sides
     mesh_module.outside_sides = volume_sign
@@ -249,45 +240,31 @@ def main() -> None:
     table = [[r["scene"], r["camera"], " / ".join(f"{100 * r[f'closed {v}']:.1f}" for v in variants),
               *(pair(r[c]) for c in columns)] for r in run.rows]  # fmt: skip
     if args.fins:
-        publish([
-            run.header(command("demos/bench_closure.py", args)) + " "
-            f"Texture {args.resolution}^3, K = {args.directions}, the corpus bench's points and {BASELINE['splat']} "
-            f"splats, quality \"high\"; truth {args.gt_ssaa}x{args.gt_ssaa} polygons; PSNR (dB) / FLIP inside the "
-            "object's box, as the corpus bench. closed %: the share of faces taken as a closed skin (fins open / "
-            "all). fins open: a face beside an edge of three faces or more open, each component signed by its "
-            "own signed volume (before); all: such faces kept in their components, a component beside such an "
-            "edge signed by what the outside sees of it (aniso3d.build.outside).",
-            "",
-            markdown_table(["scene", "camera", "closed %", *columns], table),
-        ], args.md, FINS_BEGIN, FINS_END, title="# Coverage\n\n")  # fmt: skip
-        return
-    if args.holes:
-        publish([
-            run.header(command("demos/bench_closure.py", args)) + " "
-            f"Texture {args.resolution}^3, K = {args.directions}, the corpus bench's points and {BASELINE['splat']} "
-            f"splats, quality \"high\"; truth {args.gt_ssaa}x{args.gt_ssaa} polygons; PSNR (dB) / FLIP inside the "
-            "object's box, as the corpus bench. closed %: the share of faces taken as a closed skin (summed / "
-            "all). summed: a skin's hole measure the squared sum of its open edges' lengths, edges of three "
-            "faces or more among them (until 90240ac); all: the sum of each hole's squared length, edges of "
-            f"three faces no hole (HOLE_SHARE {mesh_module.HOLE_SHARE:g} in both).",
-            "",
-            markdown_table(["scene", "camera", "closed %", *columns], table),
-        ], args.md, HOLES_BEGIN, HOLES_END, title="# Coverage\n\n")  # fmt: skip
-        return
+        legend = ("(fins open / all). fins open: a face beside an edge of three faces or more open, each component "
+                  "signed by its own signed volume (before); all: such faces kept in their components, a component "
+                  "beside such an edge signed by what the outside sees of it (aniso3d.build.outside).")  # fmt: skip
+        begin, end = FINS_BEGIN, FINS_END
+    elif args.holes:
+        legend = ("(summed / all). summed: a skin's hole measure the squared sum of its open edges' lengths, edges of "
+                  "three faces or more among them (until 90240ac); all: the sum of each hole's squared length, edges "
+                  f"of three faces no hole (HOLE_SHARE {mesh_module.HOLE_SHARE:g} in both).")  # fmt: skip
+        begin, end = HOLES_BEGIN, HOLES_END
+    else:
+        legend = ("in each variant (before / corners / all). before: the strict reading as it was (corners matched "
+                  "exactly, watertight skins only, a degenerate or repeated face opening its skin, faces drawn twice "
+                  f"built twice); corners: corners matched within {mesh_module.MERGE_SHARE:.3g} of the extent, "
+                  "degenerate and repeated faces out of the topology, a face drawn twice built once, watertight skins "
+                  "only; all: the defaults, skins with small holes closed too "
+                  f"(HOLE_SHARE {mesh_module.HOLE_SHARE:g}).")  # fmt: skip
+        begin, end = BEGIN, END
     publish([
         run.header(command("demos/bench_closure.py", args)) + " "
         f"Texture {args.resolution}^3, K = {args.directions}, the corpus bench's points and {BASELINE['splat']} "
         f"splats, quality \"high\"; truth {args.gt_ssaa}x{args.gt_ssaa} polygons; PSNR (dB) / FLIP inside the "
-        "object's box, as the corpus bench. closed %: the share of faces taken as a closed skin in each variant "
-        "(before / corners / all). before: the strict reading as it was (corners matched exactly, watertight "
-        "skins only, a degenerate or repeated face opening its skin, faces drawn twice built twice); corners: "
-        f"corners matched within {mesh_module.MERGE_SHARE:.3g} of the extent, degenerate and repeated faces out "
-        "of the topology, a face drawn twice built once, watertight skins only; all: the defaults, skins with "
-        f"small holes closed too (HOLE_SHARE {mesh_module.HOLE_SHARE:g}).",
+        "object's box, as the corpus bench. closed %: the share of faces taken as a closed skin " + legend,
         "",
         markdown_table(["scene", "camera", "closed %", *columns], table),
-    ], args.md, BEGIN, END, title="# Coverage\n\n")  # fmt: skip
-
+    ], args.md, begin, end, title="# Coverage\n\n")  # fmt: skip
 
 if __name__ == "__main__":
     main()

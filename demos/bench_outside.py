@@ -1,14 +1,14 @@
 """What reading patches by the outside costs (aniso3d/build/outside.py).
 
-A street of N x N two-storey buildings: two boxes each, the upper standing
-on the lower's lid, drawn once (its edges shared by three faces), so every
-building is three patches. Or, with ``--block N``, N^3 unit cubes in a
-block, each drawn whole, sharing their faces with their neighbours (a
-voxel export: every inner face a patch). Times ``closed_sides`` (the
-topology a build reads first) with the outside test and with it replaced
-by "open", over several runs, and prints the closed shares: the buildings'
-walls +1 and the floor plates between storeys 0; the block's outer faces
-+1, its inner ones 0.
+A street of N x N two-storey buildings (``scenes.storeys``): two boxes
+each, the upper standing on the lower's lid, drawn once (its edges shared
+by three faces), so every building is three patches. Or, with ``--block
+N``, N^3 unit cubes in a block, each drawn whole, sharing their faces with
+their neighbours (a voxel export: every inner face a patch). Times
+``closed_sides`` (the topology a build reads first) with the outside test
+and with it replaced by "open", over several runs, and prints the closed
+shares: the buildings' walls +1 and the floor plates between storeys 0;
+the block's outer faces +1, its inner ones 0.
 
     .venv/bin/python demos/bench_outside.py [--n 40 | --block 20] [--runs 5]
 """
@@ -25,27 +25,12 @@ import aniso3d.build.mesh as mesh_module
 from aniso3d.build import scenes
 
 
-def building() -> tuple[np.ndarray, np.ndarray]:
-    """Two unit boxes stacked, the upper without its floor (the lower's lid)."""
-    cube = scenes.cube()
-    v, f = cube.vertices, cube.faces
-    top = v[:, 2].max()
-    upper = v + np.array([0.0, 0.0, top - v[:, 2].min()])
-    n = len(v)
-    remap = np.arange(n) + n
-    low = np.flatnonzero(np.isclose(upper[:, 2], top))
-    same = np.array([np.flatnonzero(np.all(np.isclose(v, p), axis=1))[0] for p in upper[low]])
-    remap[low] = same
-    upper_faces = remap[f]
-    floor = np.all(np.isin(upper_faces, same), axis=1)
-    return np.vstack([v, upper]), np.vstack([f, upper_faces[~floor]])
-
-
 def street(n: int) -> tuple[np.ndarray, np.ndarray]:
-    bv, bf = building()
+    building = scenes.storeys(2)
+    bv, bf = building.vertices, building.faces
     step = float(np.ptp(bv, axis=0).max()) * 1.5
     i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-    shift = np.stack([i.ravel() * step, j.ravel() * step, np.zeros(n * n)], axis=1)
+    shift = np.stack([i.ravel() * step, np.zeros(n * n), j.ravel() * step], axis=1)
     v = (bv[None] + shift[:, None]).reshape(-1, 3)
     f = (bf[None] + (np.arange(n * n) * len(bv))[:, None, None]).reshape(-1, 3)
     return v, f

@@ -110,24 +110,11 @@ def test_holes_count_one_by_one_and_fins_are_no_holes():
 
 
 def stacked_boxes() -> tuple[Mesh, np.ndarray]:
-    """Two unit boxes stacked with a shared floor plate drawn once (a
-    building's storeys), and which of its faces are the plate."""
-    cube = scenes.cube()
-    v, f = cube.vertices, cube.faces
-    top = v[:, 2].max()
-    upper_v = v + np.array([0.0, 0.0, top - v[:, 2].min()])
-    # The upper box shares the lower's lid as its floor: the lower box's
-    # vertices at the lid's height are the upper's at its bottom.
-    n = len(v)
-    remap = np.arange(n) + n
-    low = np.isclose(upper_v[:, 2], top)
-    match = np.array([np.flatnonzero(np.all(np.isclose(v, p), axis=1))[0] for p in upper_v[low]])
-    remap[np.flatnonzero(low)] = match
-    upper_f = remap[f]
-    upper_floor = np.all(np.isin(upper_f, match), axis=1)
-    assert upper_floor.sum() == 2
-    both = Mesh.from_arrays(np.vstack([v, upper_v]), np.vstack([f, upper_f[~upper_floor]]))
-    plate = np.all(np.isclose(both.vertices[both.faces][:, :, 2], top), axis=1)
+    """Two unit boxes stacked with a shared floor plate drawn once
+    (``scenes.storeys``), and which of its faces are the plate."""
+    both = scenes.storeys(2)
+    y = both.vertices[both.faces][:, :, 1]
+    plate = np.all((y > 0.0) & (y < 2.0), axis=1)
     assert plate.sum() == 2
     return both, plate
 
@@ -142,7 +129,7 @@ def test_walls_meeting_floors_read_by_what_the_outside_sees():
     about the vertices' mean, is negative: a patch encloses nothing, and
     only the rays read it right."""
     both, plate = stacked_boxes()
-    for stray in (np.zeros((0, 3)), np.tile([0.0, 0.0, 100.0], (50, 1))):
+    for stray in (np.zeros((0, 3)), np.tile([0.0, 100.0, 0.0], (50, 1))):
         mesh = Mesh.from_arrays(np.vstack([both.vertices, stray]), both.faces)
         sides = mesh.closed_sides()
         np.testing.assert_array_equal(sides[~plate], 1)

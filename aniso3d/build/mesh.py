@@ -592,11 +592,7 @@ def _closed_components(v: np.ndarray, faces: np.ndarray, f: np.ndarray) -> np.nd
     area = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
     skin = np.bincount(root, weights=area, minlength=nf)
     closed = hole <= HOLE_SHARE * skin
-    p0, p1, p2 = (v[faces[:, k]] - v.mean(axis=0) for k in range(3))
-    volume = np.bincount(root, weights=np.einsum("ij,ij->i", p0, np.cross(p1, p2)), minlength=nf)
-    extent = float(np.ptp(v, axis=0).max()) if len(v) else 0.0
-    tiny = 1e-12 * extent**3
-    sign = np.where(volume > tiny, 1, np.where(volume < -tiny, -1, 0))
+    sign = volume_signs(v, faces, root, nf)
     # A closed component that ends at an edge of three faces or more (one
     # of its faces there, or three) is a patch of a larger whole (a wall, a
     # floor, a lid): enclosing nothing, its own signed volume says nothing
@@ -612,17 +608,25 @@ def _closed_components(v: np.ndarray, faces: np.ndarray, f: np.ndarray) -> np.nd
         key = np.unique(e * nf + c, return_counts=True)
         ends = np.unique(key[0][key[1] % 2 == 1] % nf)
         patches = ends[closed[ends]]
+        sign[patches] = 0  # open, unless the rays (within budget) read a side
         if 0 < len(patches) <= OUTSIDE_PATCHES:
             link = (ranked[:-1] == ranked[1:]) & (count[ranked[:-1]] > 2)
             whole = connected_components(nf, root[order[:-1][link] // 3], root[order[1:][link] // 3])[root]
             part = np.isin(whole, whole[np.isin(root, patches)])
             if np.count_nonzero(part) <= OUTSIDE_FACES:
                 sign[patches] = outside_sides(v, faces[part], f[part], root[part], patches, whole[part])
-            else:
-                sign[patches] = 0
-        else:
-            sign[patches] = 0
     return np.where(local & closed[root], sign[root], 0).astype(np.int8)
+
+
+def volume_signs(v: np.ndarray, faces: np.ndarray, root: np.ndarray, n: int) -> np.ndarray:
+    """(n,) int64: the sign of each component's signed volume (faces (F, 3)
+    into ``v``, component labels ``root`` (F,) below ``n``), taken about the
+    vertices' mean; 0 within 1e-12 of the extent cubed (no volume)."""
+    p0, p1, p2 = (v[faces[:, k]] - v.mean(axis=0) for k in range(3))
+    volume = np.bincount(root, weights=np.einsum("ij,ij->i", p0, np.cross(p1, p2)), minlength=n)
+    extent = float(np.ptp(v, axis=0).max()) if len(v) else 0.0
+    tiny = 1e-12 * extent**3
+    return np.where(volume > tiny, 1, np.where(volume < -tiny, -1, 0))
 
 
 def connected_components(n: int, u: np.ndarray, w: np.ndarray) -> np.ndarray:

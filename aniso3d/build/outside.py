@@ -14,11 +14,11 @@ So points just off a patch's faces on either side (the centroids of up to
 patches than :data:`SAMPLE_BUDGET` allows for) cast rays in :data:`RAYS`
 fixed directions, each turned into that side's half-space, against the
 faces of the whole that the patch and the patches it meets at such edges
-make (a building, not the next one in its street). A side whose rays escape (meet no face) is seen from outside. A patch
-whose front escapes and whose back does not (at most :data:`ONE_SIDED` of
-the front's share) is a skin wound outwards, +1; the reverse, -1; a patch
-seen from both sides (a fin, a free sheet) or from neither (a wall inside)
-is open, 0.
+make (a building, not the next one in its street). A side whose rays
+escape (meet no face) is seen from outside. A patch whose front escapes
+and whose back does not (at most :data:`ONE_SIDED` of the front's share)
+is a skin wound outwards, +1; the reverse, -1; a patch seen from both
+sides or from neither (a wall inside) is open, 0.
 
 Rays are cast in a frame whose x axis is the ray's direction, through a
 grid of columns over the faces' (y, z) boxes; each edge's crossing test is

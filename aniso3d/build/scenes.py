@@ -61,6 +61,30 @@ def sphere(radius: float = 1.0, center=(0.0, 0.0, 0.0), subdivisions: int = 4, k
     )
 
 
+def storeys(levels: int = 2, size: float = 1.0, kd=(0.8, 0.8, 0.8), ks=0.1, shininess=16.0) -> Mesh:
+    """``levels`` cubes of edge ``size`` stacked along +y, each storey's
+    floor the one below's roof, drawn once (wound upwards, as the lower
+    box's lid): the plates' edges are shared by three faces, the way
+    modelling tools build a building's storeys. Outward normals; the
+    plates between storeys are its faces whose corners all lie at an inner
+    level (0 < y < levels * size)."""
+    _check_count("storeys", levels=levels)
+    _check_positive("storeys", size=size)
+    h = 0.5 * size
+    ring = np.array([[-h, -h], [h, -h], [h, h], [-h, h]])  # counter-clockwise seen from +y
+    y = np.arange(levels + 1, dtype=np.float64) * size
+    v = np.stack([np.repeat(ring[None, :, 0], levels + 1, 0), np.repeat(y[:, None], 4, 1),
+                  -np.repeat(ring[None, :, 1], levels + 1, 0)], axis=-1).reshape(-1, 3)  # fmt: skip
+    i = np.arange(4)
+    j = (i + 1) % 4
+    lvl = np.arange(levels)[:, None] * 4
+    b0, b1, t0, t1 = lvl + i, lvl + j, lvl + 4 + i, lvl + 4 + j
+    walls = np.concatenate([np.stack([b0, b1, t1], -1), np.stack([b0, t1, t0], -1)], axis=1).reshape(-1, 3)
+    up = np.array([[0, 1, 2], [0, 2, 3]])
+    caps = np.concatenate([up[:, ::-1]] + [up + 4 * k for k in range(1, levels + 1)])  # the floor downwards
+    return Mesh.from_arrays(v, np.concatenate([walls, caps]), kd, ks, shininess, name="storeys")
+
+
 def _rotate(v: np.ndarray, axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
     """Rodrigues rotation of vectors v (n, 3) about unit axes (n, 3) by angles (n,)."""
     c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
@@ -874,6 +898,7 @@ SCENES = {
     "quad": quad,
     "cube": cube,
     "sphere": sphere,
+    "storeys": storeys,
 }
 
 #: The scenes the bench runs, so that no choice is tuned on one object. Each
