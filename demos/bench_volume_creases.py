@@ -22,7 +22,11 @@ line falls outside are left out). ``--rule split``: where the plane goes
 on across a face as another strip, a strip's halo carries the part of its
 band that strip leaves (``sheet_line_halos.SPLIT_REST``: a beam's face
 split by a voxel face along its length); off, None (no halo where the plane
-goes on).
+goes on). ``--rule apart``: a run's closed backs summed apart from its
+other sheets, per side, and the larger counted (``RUN_BACK_APART``: a
+solid's back lies behind its own front); off, False: summed with the rest
+(a chamfered edge on the outline covered the fills of the face seen and the
+face turned away together).
 
 Per scene (corpus names, or mesh files), at the corpus bench's two cameras
 (*close*: the object filling the image; *minified*: a voxel about a pixel),
@@ -35,7 +39,7 @@ rule off in the second (each uploads the texture once, with the rule as set
 then).
 
     .venv/bin/python demos/bench_volume_creases.py [SCENE | MESH FILE ...] [--size 512]
-        [--rule crease|thick|back|lines|foot|range|split] [--md docs/coverage.md]
+        [--rule crease|thick|back|lines|foot|range|split|apart] [--md docs/coverage.md]
 """
 
 from __future__ import annotations
@@ -71,7 +75,8 @@ RULES = {"crease": ({"SHEET_CREASE": 0.0}, "bench_volume_creases"),
          "foot": ({"STRIP_FOOT": 1.0}, "bench_volume_strip_foot"),
          "range": ({"sheet_halfplanes.C_RANGE": 0.875, "HALF_C_RANGE": 0.875, "sheet_line_halos.C_RANGE": 0.875},
                    "bench_volume_line_range"),
-         "split": ({"sheet_line_halos.SPLIT_REST": None}, "bench_volume_split_halos")}  # fmt: skip
+         "split": ({"sheet_line_halos.SPLIT_REST": None}, "bench_volume_split_halos"),
+         "apart": ({"RUN_BACK_APART": False}, "bench_volume_backs_apart")}  # fmt: skip
 
 
 def _where(name: str):

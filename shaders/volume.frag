@@ -71,7 +71,9 @@ vec3 g_light_dir[4];
 // (coverage cap below 1 so the optical depth stays finite), T_MIN (early
 // termination; T_MIN_PLAIN in the plain marching), BIG (stands for an
 // infinite ray parameter), RUN_SHARE, RUN_GAP, RUN_PARALLEL, RUN_STEEP and RUN_GRAZE
-// (the runs of surface sheets: render/volume.py:sheet_terms), HALF_C_RANGE
+// (the runs of surface sheets: render/volume.py:sheet_terms), RUN_BACK_MIN and
+// RUN_BACK_APART (a closed back's colour, and its coverage counted apart:
+// render/volume.py), HALF_C_RANGE
 // and HALF_PIXELS (half-planes: render/sheet_halfplanes.py), STRIP_PIXELS
 // (strips: render/sheet_strips.py), CREASE_BIT and FACE_CUT_BIT (entry word
 // 11's flags of a crease sheet's halo and of a line halo cut by its face:
@@ -208,8 +210,9 @@ bool g_has50;      // whether it did (t can be negative: o may lie past near)
 bool g_run;        // a run is open
 vec3 g_run_ref;    // the unit normal of its first sheet
 float g_run_end;   // ray parameter where its last voxel ends
-vec2 g_run_band;   // share of the footprint crossing its sheets, on each side
-vec2 g_run_hit;    // fills of the sheets the centre ray crosses, on each side
+vec4 g_run_band;   // share of the footprint crossing its sheets, on each side (xy), of
+                   // their closed backs apart (zw: back_share, run_sides())
+vec4 g_run_hit;    // fills of the sheets the centre ray crosses, the same way
 float g_run_halo;  // the largest share of the footprint its halos carry past an edge
 vec4 g_run_edge;   // band (xy) and hit (zw) on each side of the sheets an open edge
                    // or silhouette crease cuts: the largest (one edge's faces overlap)
@@ -245,9 +248,18 @@ float crossing_fraction(float lo, float hi, float half_w) {
 // front-most surface's), its colour the same on each side, the near side's
 // where it covers the footprint and the far side's only where that covers
 // more (run_color()), and closes it.
+// Each side's band (xy) and hit (zw): the sheets' and their closed backs'
+// sums, the larger, as a solid's back lies behind its own front (a box's
+// silhouette crease: the face turned away covers what the face seen covers),
+// and the sheets an edge cuts. Mirrors render/volume.py:run_sides.
+vec4 run_sides() {
+    return vec4(max(g_run_band.xy, g_run_band.zw) + g_run_edge.xy, max(g_run_hit.xy, g_run_hit.zw) + g_run_edge.zw);
+}
+
 float run_sheets() {
-    vec2 band = g_run_band + g_run_edge.xy;
-    vec2 hit = g_run_hit + g_run_edge.zw;
+    vec4 sides = run_sides();
+    vec2 band = sides.xy;
+    vec2 hit = sides.zw;
     float cov = max(band.x, band.y);
     if (hit.x > 0.0 && !(hit.y > 0.0)) cov = max(cov, hit.x);
     return clamp(cov, 0.0, 1.0);
@@ -267,8 +279,9 @@ vec3 run_color() {
     vec3 all_c = g_run_col / g_run_w;
     float w0 = g_run_w - g_run_far.w;
     if (!(g_run_far.w > 0.0) || !(w0 > 1e-6 * g_run_w)) return all_c;
-    vec2 band = g_run_band + g_run_edge.xy;
-    vec2 hit = g_run_hit + g_run_edge.zw;
+    vec4 sides = run_sides();
+    vec2 band = sides.xy;
+    vec2 hit = sides.zw;
     float b0 = max(max(band.x, hit.y > 0.0 ? 0.0 : hit.x), g_run_halo);
     float b1 = max(band.y - b0, 0.0);
     if (!(b0 + b1 > 0.0)) return all_c;
@@ -627,8 +640,8 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                             if (!g_run) {
                                 g_run = true;
                                 g_run_ref = nh;
-                                g_run_band = vec2(0.0);
-                                g_run_hit = vec2(0.0);
+                                g_run_band = vec4(0.0);
+                                g_run_hit = vec4(0.0);
                                 g_run_halo = 0.0;
                                 g_run_edge = vec4(0.0);
                                 g_run_col = vec3(0.0);
@@ -662,9 +675,17 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                             g_run_edge[side] = max(g_run_edge[side], band);
                             g_run_edge[2 + side] = max(g_run_edge[2 + side], hit ? fill * ramp.x : 0.0);
                         } else {
-                            g_run_band[side] += band;
-                            if (hit && abs(nw) < RUN_GRAZE) g_run_hit += vec2(fill);
-                            else g_run_hit[side] += hit ? fill : 0.0;
+                            // Its closed back's share apart (run_sides()).
+                            float bk = RUN_BACK_APART != 0 && nwo > 0.0 ? min(abs(closed), 1.0) : 0.0;
+                            g_run_band[side] += band * (1.0 - bk);
+                            g_run_band[2 + side] += band * bk;
+                            float fh = hit ? fill : 0.0;
+                            if (hit && abs(nw) < RUN_GRAZE) {
+                                g_run_hit += fh * vec4(1.0 - bk, 1.0 - bk, bk, bk);
+                            } else {
+                                g_run_hit[side] += fh * (1.0 - bk);
+                                g_run_hit[2 + side] += fh * bk;
+                            }
                             steep = steep || (hit && abs(nw) >= RUN_STEEP);
                         }
                         // A halo is not hidden by the sheets before it (it
@@ -772,7 +793,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
     }
     // A run crossed whole on its entering side, steeply, is settled: its far side
     // could only follow within RUN_GAP through an object under a voxel thick.
-    vec2 run_hit = g_run_hit + g_run_edge.zw;
+    vec2 run_hit = run_sides().zw;
     bool settled = steep && run_hit.x >= 1.0 && run_hit.y == 0.0;
     if (!(seg > 0.0)) {
         if (settled) close_run();

@@ -859,3 +859,85 @@ def test_a_thick_solids_back_is_hidden_whole(r, resolution, tmp_path):
         if name == "on":
             where = dump(tmp_path, "thick", ref, img)
     assert err["on"] < 0.125 and err["off"] > 0.13, f"{err} {where}"
+
+
+def chamfered_prism(cut: float = 0.04) -> Mesh:
+    """A closed square prism along x, its cross-section [-1, 1]^2 in (y, z)
+    with its four long edges cut by ``cut`` (a 45-degree bevel): at 16 and
+    32 voxels an axis the bevel lies inside the voxels of the grid's outer
+    planes, with the two faces it joins filling part of them (a CAD part's
+    chamfered edge on the texture's bounds)."""
+    c = cut
+    ring = np.array([(1, -1 + c), (1, 1 - c), (1 - c, 1), (-1 + c, 1), (-1, 1 - c), (-1, -1 + c), (-1 + c, -1),
+                     (1 - c, -1)], np.float64)  # fmt: skip
+    n = len(ring)
+    v = np.concatenate([np.c_[np.full(n, -1.0), ring], np.c_[np.full(n, 1.0), ring], [[-1.0, 0, 0], [1.0, 0, 0]]])
+    i = np.arange(n)
+    j = (i + 1) % n
+    f = np.concatenate([np.c_[i, j, n + j], np.c_[i, n + j, n + i], np.c_[np.full(n, 2 * n), j, i],
+                        np.c_[np.full(n, 2 * n + 1), n + i, n + j]])  # fmt: skip
+    return Mesh.from_arrays(v, f, (0.7, 0.7, 0.7), 0.1, 16.0, name="prism")
+
+
+def test_run_sides_count_a_solids_back_with_its_front_once():
+    """Per side, a run's closed backs are summed apart from its other
+    sheets and the larger counts (then the sheets an edge cuts): a box's
+    silhouette crease whose front and back each fill 0.45 of their voxel
+    covers 0.45, not 0.9; fronts alone, or backs alone, sum as before."""
+    from aniso3d.rendering.volume import run_sides
+
+    run = {"band": np.array([0.2, 0.1]), "hit": np.array([0.45, 0.0]), "band_back": np.array([0.3, 0.05]),
+           "hit_back": np.array([0.45, 0.2]), "edge": np.array([0.0, 0.3, 0.1, 0.0])}  # fmt: skip
+    band, hit = run_sides(run)
+    np.testing.assert_allclose(band, [0.3, 0.4])
+    np.testing.assert_allclose(hit, [0.55, 0.2])
+    assert run_coverage(*run_sides({**run, "hit": np.array([0.45, 0.0]), "hit_back": np.array([0.45, 0.0]),
+                                    "edge": np.zeros(4)})) == pytest.approx(0.45)  # fmt: skip
+
+
+@pytest.mark.gpu
+def test_a_chamfered_edges_outline_counts_its_back_once(r, monkeypatch, tmp_path):
+    """The chamfered prism with its beveled edges on its outline, three
+    views at 16 and 32 voxels an axis (2 to 4 pixels a voxel): where the
+    face seen and the face turned away both fill part of a bevel's voxel,
+    the run summed their fills and drew the outline too wide. Counted once
+    (RUN_BACK_APART), the outline's mean |alpha - truth| over the pixels the
+    8 x 8 polygons cover in part falls in every view (measured 0.106 on
+    average against 0.120 summed, a renderer made with the rule off), the
+    covered area stays within 0.5 % of the truth's (measured -0.24 to
+    +0.31 %; summed up to +0.89 %), and 20 of the pixels the rule changes
+    agree with march_ray_np within 1/255."""
+    from aniso3d.rendering import volume
+    from aniso3d.rendering.renderer import Renderer
+
+    prism = chamfered_prism()
+    errs = {"on": [], "off": []}
+    changed = []
+    for resolution in (16, 32):
+        tex = aniso3d.build_texture(prism, resolution, 16)
+        for d in [(0.25, 1.0, -0.35), (-0.3, 1.0, 0.6), (0.4, 0.3, 1.0)]:
+            cam = Camera.frame(prism.bounds, d, fov=30.0)
+            ref = truth(r, prism, cam, ssaa=8)
+            edge = (ref[..., 3] > 0.02) & (ref[..., 3] < 0.98)
+            with Renderer(SIZE) as now:
+                on, _ = render_float(now, tex, cam)
+            with monkeypatch.context() as m:
+                m.setattr(volume, "RUN_BACK_APART", False)
+                with Renderer(SIZE) as before:
+                    off, _ = render_float(before, tex, cam)
+            for key, img in (("on", on), ("off", off)):
+                errs[key].append(float(np.abs(img[..., 3] - ref[..., 3])[edge].mean()))
+            area = on[..., 3].sum() / ref[..., 3].sum() - 1.0
+            assert abs(area) < 0.005, f"{resolution} {d}: {area:+.4f} " + dump(tmp_path, "prism", ref, on)
+            diff = np.argwhere(np.abs(on - off).max(axis=-1) > 2 / 255)
+            changed += [(tex, cam, on, y, x) for y, x in diff]
+    assert all(a <= b + 0.002 for a, b in zip(errs["on"], errs["off"], strict=True)), errs
+    assert np.mean(errs["on"]) < np.mean(errs["off"]) - 0.008, errs
+    assert len(changed) > 40
+    rng = np.random.default_rng(5)
+    for i in rng.choice(len(changed), 20, replace=False):
+        tex, cam, img, y, x = changed[i]
+        dirs, t0, t1 = pixel_rays(cam, SIZE, tex.bounds)
+        rgb, alpha = march_ray_np(tex, cam.position, dirs[y, x], r.lighting, (t0[y, x], t1[y, x]),
+                                  pixel_angle=pixel_angle(cam, SIZE))  # fmt: skip
+        assert np.abs(rgb - img[y, x, :3]).max() < 1 / 255 and abs(alpha - img[y, x, 3]) < 1 / 255, (y, x)

@@ -306,6 +306,14 @@ CREASE_BIT = 27
 #: (the unlit underside of a box drew a dark line along its outline;
 #: docs/coverage.md, "A solid's back in its outline").
 RUN_BACK_MIN = 1e-3
+#: A run sums its closed backs' bands and fills apart from its other
+#: sheets', per side, and counts the larger (:func:`run_sides`): a solid's
+#: back lies behind its own front, so where a CAD part's beveled edge is on
+#: the outline, the face seen and the face turned away, each filling part of
+#: the bevel's voxel, covered the sum of their fills and drew the outline
+#: too wide. False: summed with the rest, as before (docs/coverage.md, "A
+#: solid's back counted once").
+RUN_BACK_APART = True
 #: A run closes when the ray has gone this far (grid units) past its last
 #: voxel: a surface cut by voxel faces, or a silhouette's near and far sides,
 #: lie in voxels a cell's diagonal apart at most along the ray.
@@ -734,6 +742,20 @@ def back_terms(
     return vis, np.maximum(v_dot_w, 0.0)
 
 
+def back_share(texture: AnisoTexture, rows: np.ndarray, w: np.ndarray, thick: np.ndarray | None = None) -> np.ndarray:
+    """(E,) the share of each entry ``rows`` that is a closed surface's
+    back seen along the unit ``w``: its closed share ``min(|sigma|, 1)``
+    where the closed part faces away from the eye, else 0. A run sums its
+    sheets' backs apart from the rest and counts the larger (:func:`run_sides`).
+    Mirrors composite() in volume.frag."""
+    sigma = closed_sign(texture, rows)
+    if thick is not None:
+        t = thick[rows]
+        sigma = np.where(t, np.sign(sigma) * (np.abs(stored_sign(sigma, t)) - THICK_CODE), sigma)
+    n = np.asarray(texture.entry_normal, np.float32)[rows].astype(np.float64)
+    return np.where(RUN_BACK_APART & (sigma * (n @ w) > 0.0), np.minimum(np.abs(sigma), 1.0), 0.0)
+
+
 def covered_area(texture: AnisoTexture, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
     """Entry areas (h^2) as the volume draws them: each times its
     ``entry_cover``, so that the back of a thin solid, which its front
@@ -875,6 +897,18 @@ def crossing_fraction(lo: np.ndarray, hi: np.ndarray, half_width: np.ndarray) ->
     return np.where(hw <= 1e-7, point, box)
 
 
+def run_sides(run: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Per side (2,) the band and hit of a run (the NumPy ray's ``run``):
+    its sheets' sums (``band``, ``hit``) and their closed backs' apart
+    (``band_back``, ``hit_back``), the larger, as a solid's back lies behind
+    its own front (at a box's silhouette crease the face turned away covers
+    what the face seen covers: summed, they drew its outline too wide), plus
+    the sheets an edge cuts (``edge``). Mirrors run_sides() in volume.frag."""
+    band = np.maximum(run["band"], run.get("band_back", 0.0)) + run["edge"][:2]
+    hit = np.maximum(run["hit"], run.get("hit_back", 0.0)) + run["edge"][2:]
+    return band, hit
+
+
 def run_coverage(band: np.ndarray, hit: np.ndarray, halo: float = 0.0) -> float:
     """Coverage of a run of surface sheets from its sums on each side (2,):
     the side where the ray met the run's first sheet (entering a surface)
@@ -912,7 +946,7 @@ def run_color(run: dict) -> np.ndarray:
     w0 = run["w"] - run["far_w"]
     if not run["far_w"] > 0.0 or not w0 > 1e-6 * run["w"]:
         return all_c
-    band, hit = run["band"] + run["edge"][:2], run["hit"] + run["edge"][2:]
+    band, hit = run_sides(run)
     b0 = max(band[0], 0.0 if hit[1] > 0.0 else hit[0], run["halo"])
     b1 = max(band[1] - b0, 0.0)
     if not b0 + b1 > 0.0:
@@ -1084,7 +1118,7 @@ def sheet_terms(
                "hit": np.where(hit, fill * ramp[:, 0], 0.0)[keep], "counted": counted[keep],
                "weight": weight[keep], "color": run_c[keep], "t": t_hit[keep],
                "edge": (ramp[:, 0] < 1.0)[keep], "halo": np.zeros(int(keep.sum()), dtype=bool),
-               "vis": vis[keep]}  # fmt: skip
+               "vis": vis[keep], "back": back_share(texture, rows[keep], w, thick)}  # fmt: skip
         if layout is not None and halos is not None and edges == "filtered":
             run = _with_halos(run, layout, halos, texture, w, lighting, normal, x_in, chords, pixels_v,
                               back_hide if opacity == "planar" else 0.0)  # fmt: skip
@@ -1106,7 +1140,7 @@ def sheet_terms(
         _weighted_colors(owner, V, c, all_w, vis * area),
     )
     if run is None:
-        run = {k: np.zeros(0) for k in ("voxel", "nw", "band", "hit", "counted", "weight", "t", "vis")}
+        run = {k: np.zeros(0) for k in ("voxel", "nw", "band", "hit", "counted", "weight", "t", "vis", "back")}
         run.update(normal=np.zeros((0, 3)), color=np.zeros((0, 3)), edge=np.zeros(0, bool), halo=np.zeros(0, bool))
         run["voxel"] = run["voxel"].astype(np.int64)
     return SheetTerms(projected, crossed, t_cross, sheet_color, cloud_color, run, back)
@@ -1181,7 +1215,8 @@ def _with_halos(run, layout, halos, texture, w, lighting, normal, x_in, chords, 
     halo_run = {"voxel": owner[ok], "normal": nh[ok], "nw": nw[ok], "band": (fill * band_all * ramp[:, 0])[ok],
                 "hit": np.where(hit, fill * ramp[:, 0], 0.0)[ok], "counted": counted[ok], "weight": weight[ok],
                 "color": c[ok], "t": t_hit[ok], "edge": np.zeros(int(ok.sum()), bool),
-                "halo": np.ones(int(ok.sum()), bool), "vis": vis[ok]}  # fmt: skip
+                "halo": np.ones(int(ok.sum()), bool), "vis": vis[ok],
+                "back": back_share(texture, src[ok], w, layout.thick)}  # fmt: skip
     # Each voxel's own sheets, then its halos (as the GPU lists them).
     order = np.argsort(np.concatenate([run["voxel"], halo_run["voxel"]]), kind="stable")
     return {k: np.concatenate([run[k], halo_run[k]])[order] for k in run}
@@ -1494,7 +1529,7 @@ def trace_ray_np(
     run: dict | None = None
 
     def run_sheets() -> float:
-        return run_coverage(run["band"] + run["edge"][:2], run["hit"] + run["edge"][2:])
+        return run_coverage(*run_sides(run))
 
     def close_run() -> None:
         nonlocal C, T, run
@@ -1545,6 +1580,7 @@ def trace_ray_np(
                     steep = bool(((e["hit"] > 0.0) & whole & (np.abs(e["nw"]) >= RUN_STEEP)).any())
                     if run is None:
                         run = {"ref": e["normal"][0], "band": np.zeros(2), "hit": np.zeros(2),
+                               "band_back": np.zeros(2), "hit_back": np.zeros(2),
                                "edge": np.zeros(4), "halo": 0.0, "col": np.zeros(3), "w": 0.0,
                                "far_col": np.zeros(3), "far_w": 0.0, "far_wr": 0.0, "wr": 0.0,
                                "tw": 0.0}  # fmt: skip
@@ -1555,9 +1591,13 @@ def trace_ray_np(
                     same = np.where(np.abs(along) >= RUN_PARALLEL, e["nw"] * (run["ref"] @ d) * along, 1.0)
                     other = (same < 0.0).astype(np.int64)
                     graze = np.abs(e["nw"]) < RUN_GRAZE
-                    run["band"] = run["band"] + np.bincount(other[whole], e["band"][whole], minlength=2)
-                    run["hit"] = run["hit"] + np.bincount(other[whole], (e["hit"] * ~graze)[whole], minlength=2)
-                    run["hit"] = run["hit"] + float((e["hit"] * graze)[whole].sum())
+                    # Closed backs apart (run_sides).
+                    for key, part in (("", 1.0 - e["back"]), ("_back", e["back"])):
+                        band_p, hit_p = (e["band"] * part)[whole], (e["hit"] * part)[whole]
+                        run["band" + key] = run["band" + key] + np.bincount(other[whole], band_p, minlength=2)
+                        run["hit" + key] = run["hit" + key] + np.bincount(other[whole], hit_p * ~graze[whole],
+                                                                          minlength=2)  # fmt: skip
+                        run["hit" + key] = run["hit" + key] + float((hit_p * graze[whole]).sum())
                     # Sheets an edge cuts: the largest per side (a silhouette's
                     # crease: its two faces overlap); halos: the largest.
                     # (No grazing rule for them: volume.frag.)
@@ -1590,10 +1630,7 @@ def trace_ray_np(
             if a_s + a_f > 0.0:
                 col = (a_s * st.sheet_color[k] + a_f * st.cloud_color[k]) / (a_s + a_f)
         # A run crossed whole on its entering side, steeply, is settled (volume.frag).
-        settled = (
-            steep and run is not None
-            and run["hit"][0] + run["edge"][2] >= 1.0 and run["hit"][1] + run["edge"][3] == 0.0
-        )  # fmt: skip
+        settled = steep and run is not None and run_sides(run)[1][0] >= 1.0 and run_sides(run)[1][1] == 0.0
         if not seg > 0.0:
             if settled:
                 close_run()
@@ -1943,6 +1980,7 @@ class VolumeRenderer:
             "RUN_GRAZE": RUN_GRAZE,
             "RUN_GAP": RUN_GAP,
             "RUN_BACK_MIN": RUN_BACK_MIN,
+            "RUN_BACK_APART": int(RUN_BACK_APART),
             "GRID_PAD": GRID_PAD,
             "CLIP_MARGIN": CLIP_MARGIN,
             "HALF_C_RANGE": HALF_C_RANGE,
