@@ -26,7 +26,9 @@ goes on). ``--rule apart``: a run's closed backs summed apart from its
 other sheets, per side, and the larger counted (``RUN_BACK_APART``: a
 solid's back lies behind its own front); off, False: summed with the rest
 (a chamfered edge on the outline covered the fills of the face seen and the
-face turned away together).
+face turned away together). ``--rule strips``: a crease sheet that fits
+no half-plane but a strip (a narrow face between two creases) drawn as its
+strip (``CREASE_STRIPS``); off, False: a surface sheet in the runs.
 
 Per scene (corpus names, or mesh files), at the corpus bench's two cameras
 (*close*: the object filling the image; *minified*: a voxel about a pixel),
@@ -39,7 +41,7 @@ rule off in the second (each uploads the texture once, with the rule as set
 then).
 
     .venv/bin/python demos/bench_volume_creases.py [SCENE | MESH FILE ...] [--size 512]
-        [--rule crease|thick|back|lines|foot|range|split|apart] [--md docs/coverage.md]
+        [--rule crease|thick|back|lines|foot|range|split|apart|strips] [--md docs/coverage.md]
 """
 
 from __future__ import annotations
@@ -76,7 +78,8 @@ RULES = {"crease": ({"SHEET_CREASE": 0.0}, "bench_volume_creases"),
          "range": ({"sheet_halfplanes.C_RANGE": 0.875, "HALF_C_RANGE": 0.875, "sheet_line_halos.C_RANGE": 0.875},
                    "bench_volume_line_range"),
          "split": ({"sheet_line_halos.SPLIT_REST": None}, "bench_volume_split_halos"),
-         "apart": ({"RUN_BACK_APART": False}, "bench_volume_backs_apart")}  # fmt: skip
+         "apart": ({"RUN_BACK_APART": False}, "bench_volume_backs_apart"),
+         "strips": ({"CREASE_STRIPS": False}, "bench_volume_crease_strips")}  # fmt: skip
 
 
 def _where(name: str):

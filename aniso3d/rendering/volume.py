@@ -280,6 +280,13 @@ RUN_SHARE = 0.999
 #: stays in the runs, its line cutting it as an edge on a voxel face cuts a
 #: sheet (render/sheet_creases.py).
 SHEET_CREASE = 0.5
+#: A crease sheet of a closed surface whose facets fit no half-plane but a
+#: strip between two parallel lines (a narrow face between two creases: a
+#: CAD part's bevel or fillet facet, a side of a beam about a voxel thick)
+#: is drawn as that strip (render/sheet_strips.py), not counted over its
+#: whole section in the runs (:func:`layout_sheets`; docs/coverage.md,
+#: "Narrow faces between creases"). False: a surface sheet, as before.
+CREASE_STRIPS = True
 #: Strips carry their footprint into the voxels beside them through line
 #: halos (render/sheet_line_halos.py), so that they can be drawn where a
 #: voxel spans about a pixel (STRIP_PIXELS). False: none (as before them).
@@ -1344,16 +1351,38 @@ def line_halo_entries(entries: np.ndarray, lh: LineHalos) -> np.ndarray:
     return halo
 
 
+def layout_sheets(texture: AnisoTexture) -> tuple[EntrySheets, SheetHalfplanes, np.ndarray]:
+    """``texture``'s :func:`entry_sheets` as the renderer lays them out, and
+    their half-planes and crease partners' angles (:func:`_sheet_halfplanes`):
+    a crease sheet of a closed surface that is no half-plane but fits a
+    strip (:data:`CREASE_STRIPS`) is no surface sheet (its static share its
+    own fill's, :data:`SHEET_FILL`), so that it is drawn as that strip."""
+    sheets = entry_sheets(texture)
+    hp, phi = _sheet_halfplanes(texture, sheets)
+    if not CREASE_STRIPS or not sheets.crease.any():
+        return sheets, hp, phi
+    sigma = closed_sign(texture)
+    narrow = sheets.crease & ~hp.mask & (sigma != 0.0)
+    if not narrow.any():
+        return sheets, hp, phi
+    # (Only those fitted here: every other entry passed as a surface sheet.)
+    st = sheet_strips(texture, sheets, ~narrow, _no_creases(hp, sheets), sigma)
+    narrow &= st.mask
+    with np.errstate(divide="ignore", invalid="ignore"):
+        own = np.where(sheets.section > 1e-9, sheets.area / sheets.section, 0.0)
+    share = np.where(narrow, _ramp(own, SHEET_FILL).astype(np.float16).astype(np.float64), sheets.share)
+    return replace(sheets, share=share, crease=sheets.crease & ~narrow), hp, phi
+
+
 def sheet_layout(texture: AnisoTexture) -> SheetLayout:
     """The :class:`SheetLayout` of ``texture``."""
-    sheets = entry_sheets(texture)
+    sheets, hp, phi = layout_sheets(texture)
     ed = sheet_edges(texture, sheets, sheets.surface)
     sl = sheet_slopes(texture, sheets, sheets.surface)
     half = lambda x: x.astype(np.float16).astype(np.float64)  # noqa: E731
     pshape = np.asarray(texture.shape, dtype=np.int64) + 2 * GRID_PAD
     keys = cell_keys(ed.halo_cell + GRID_PAD, pshape)
     order = np.argsort(keys, kind="stable")
-    hp, phi = _sheet_halfplanes(texture, sheets)
     st = sheet_strips(texture, sheets, sheets.surface, _no_creases(hp, sheets), closed_sign(texture))
     lh = sheet_line_halos(sheets, st, texture)
     lkeys = cell_keys(lh.cell + GRID_PAD, pshape)
@@ -1732,7 +1761,7 @@ def pack_volume_grid(texture: AnisoTexture) -> PackedVolume:
         raise InputError("texture coords lie outside its grid shape; the texture is damaged")
 
     E = texture.n_entries
-    sheets = entry_sheets(texture)
+    sheets, halfplanes, phi = layout_sheets(texture)
     entries = np.zeros((E, ENTRY_WORDS), dtype=np.uint32)
     entries[:, 0:3] = np.asarray(texture.entry_normal, dtype=np.float32).view(np.uint32)
     entries[:, 3] = covered_area(texture).astype(np.float32).view(np.uint32)
@@ -1750,7 +1779,6 @@ def pack_volume_grid(texture: AnisoTexture) -> PackedVolume:
     edges = sheet_edges(texture, sheets, sheets.surface)
     entries[:, 11] = edge_words(edges.face, edges.kind, edges.angle)
     # A half-plane has no edges on faces: its words take the edges' angles' bits.
-    halfplanes, phi = _sheet_halfplanes(texture, sheets)
     lines = halfplane_words(halfplanes)
     plain_hp, crease_hp = halfplanes.mask & ~sheets.crease, halfplanes.mask & sheets.crease
     entries[:, 11] = np.where(plain_hp, (entries[:, 11] & 0x7F7) | lines, entries[:, 11])
