@@ -29,6 +29,8 @@ solid's back lies behind its own front); off, False: summed with the rest
 face turned away together). ``--rule strips``: a crease sheet that fits
 no half-plane but a strip (a narrow face between two creases) drawn as its
 strip (``CREASE_STRIPS``); off, False: a surface sheet in the runs.
+``--rule tolerance``: an entry a strip when the fitted strip's centroid
+lies within ``STRIP_TOLERANCE`` 0.2 voxel of its facets'; off, 0.03.
 
 Per scene (corpus names, or mesh files), at the corpus bench's two cameras
 (*close*: the object filling the image; *minified*: a voxel about a pixel),
@@ -41,7 +43,7 @@ rule off in the second (each uploads the texture once, with the rule as set
 then).
 
     .venv/bin/python demos/bench_volume_creases.py [SCENE | MESH FILE ...] [--size 512]
-        [--rule crease|thick|back|lines|foot|range|split|apart|strips] [--md docs/coverage.md]
+        [--rule crease|thick|back|lines|foot|range|split|apart|strips|tolerance] [--md docs/coverage.md]
 """
 
 from __future__ import annotations
@@ -79,7 +81,8 @@ RULES = {"crease": ({"SHEET_CREASE": 0.0}, "bench_volume_creases"),
                    "bench_volume_line_range"),
          "split": ({"sheet_line_halos.SPLIT_REST": None}, "bench_volume_split_halos"),
          "apart": ({"RUN_BACK_APART": False}, "bench_volume_backs_apart"),
-         "strips": ({"CREASE_STRIPS": False}, "bench_volume_crease_strips")}  # fmt: skip
+         "strips": ({"CREASE_STRIPS": False}, "bench_volume_crease_strips"),
+         "tolerance": ({"sheet_strips.STRIP_TOLERANCE": 0.03}, "bench_volume_strip_tolerance")}  # fmt: skip
 
 
 def _where(name: str):
