@@ -838,13 +838,10 @@ def entry_sheets(texture: AnisoTexture, voxels: np.ndarray | None = None) -> Ent
     crease = turned_away[owner] & (share >= RUN_SHARE) & (_ramp(own, SHEET_FILL) < RUN_SHARE)
     spread = np.clip(1.0 - np.linalg.norm(n, axis=1), 0.0, 1.0)
     slack = SHEET_EPS + SHEET_BEND * np.sqrt(spread) * np.clip(1.0 - spread / SHEET_BEND_MAX, 0.0, 1.0)
-    quantised = texture.meta.get(QUANTISED)
-    if quantised:
-        # Rounded centroids and normals move neighbouring voxels' planes apart
-        # by up to a few 1e-2 voxel where they meet (version 2; a few 1e-3 in
-        # version 3, whose files say 3): sheets widen by that.
-        fine = not isinstance(quantised, bool) and isinstance(quantised, int) and quantised >= 3
-        slack = slack + (SHEET_QUANTISED_V3 if fine else SHEET_QUANTISED) * share
+    # Rounded centroids and normals move neighbouring voxels' planes apart
+    # by up to a few 1e-2 voxel where they meet (version 2; a few 1e-3 in
+    # version 3, whose files say 3): sheets widen by that.
+    slack = slack + _quantised_slack(texture) * share
     # Fill, share, area and slack as the GPU stores them (float16): where the
     # sheets bring a ray's transmittance to about 0.5, its depth hangs on the
     # last digit.
@@ -853,6 +850,17 @@ def entry_sheets(texture: AnisoTexture, voxels: np.ndarray | None = None) -> Ent
     sheet_area = np.minimum(sheet_area, 6e4).astype(np.float16).astype(np.float64)
     slack = np.minimum(slack, 6e4).astype(np.float16).astype(np.float64)
     return EntrySheets(nh, d, section, sheet_area, fill, share, slack, crease)
+
+
+def _quantised_slack(texture: AnisoTexture) -> float:
+    """The crossing slack a quantised texture's sheets add per unit of
+    static share (:attr:`EntrySheets.slack`): :data:`SHEET_QUANTISED` for
+    version 2 files, :data:`SHEET_QUANTISED_V3` from version 3, 0 built."""
+    quantised = texture.meta.get(QUANTISED)
+    if not quantised:
+        return 0.0
+    fine = not isinstance(quantised, bool) and isinstance(quantised, int) and quantised >= 3
+    return SHEET_QUANTISED_V3 if fine else SHEET_QUANTISED
 
 
 @dataclass
@@ -1371,7 +1379,10 @@ def layout_sheets(texture: AnisoTexture) -> tuple[EntrySheets, SheetHalfplanes, 
     with np.errstate(divide="ignore", invalid="ignore"):
         own = np.where(sheets.section > 1e-9, sheets.area / sheets.section, 0.0)
     share = np.where(narrow, _ramp(own, SHEET_FILL).astype(np.float16).astype(np.float64), sheets.share)
-    return replace(sheets, share=share, crease=sheets.crease & ~narrow), hp, phi
+    # A quantised texture's slack follows the share (entry_sheets).
+    slack = sheets.slack + _quantised_slack(texture) * (share - sheets.share)
+    slack = np.minimum(np.maximum(slack, 0.0), 6e4).astype(np.float16).astype(np.float64)
+    return replace(sheets, share=share, slack=slack, crease=sheets.crease & ~narrow), hp, phi
 
 
 def sheet_layout(texture: AnisoTexture) -> SheetLayout:
