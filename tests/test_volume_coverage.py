@@ -87,6 +87,17 @@ def voxel_pixels(tex, cam: Camera, size=SIZE) -> float:
     return float(tex.voxel_size / (dist * pixel_angle(cam, size)))
 
 
+def assert_twin_agrees(r, picks) -> None:
+    """Each of ``picks``, (texture, camera, image, y, x) with the image the
+    volume renderer's (float, row 0 at the top), against march_ray_np:
+    RGB and alpha within 1/255."""
+    for tex, cam, img, y, x in picks:
+        dirs, t0, t1 = pixel_rays(cam, SIZE, tex.bounds)
+        rgb, alpha = march_ray_np(tex, cam.position, dirs[y, x], r.lighting, (t0[y, x], t1[y, x]),
+                                  pixel_angle=pixel_angle(cam, SIZE))  # fmt: skip
+        assert np.abs(rgb - img[y, x, :3]).max() < 1 / 255 and abs(alpha - img[y, x, 3]) < 1 / 255, (y, x)
+
+
 def leaf_cloud(n_leaves: int, leaf: float, seed: int = 0) -> Mesh:
     """Square leaves of edge ``leaf``, centres uniform in the unit ball,
     orientations uniform: facets at independent random places."""
@@ -826,12 +837,7 @@ def test_backs_shown_as_the_front_agree_with_the_twin_and_the_polygons(r, monkey
     assert np.mean(errs["on"]) < 0.0055 < np.mean(errs["off"]), errs
     assert len(changed) > 40
     rng = np.random.default_rng(3)
-    for i in rng.choice(len(changed), 20, replace=False):
-        tex, cam, img, y, x = changed[i]
-        dirs, t0, t1 = pixel_rays(cam, SIZE, tex.bounds)
-        rgb, alpha = march_ray_np(tex, cam.position, dirs[y, x], r.lighting, (t0[y, x], t1[y, x]),
-                                  pixel_angle=pixel_angle(cam, SIZE))  # fmt: skip
-        assert np.abs(rgb - img[y, x, :3]).max() < 1 / 255 and abs(alpha - img[y, x, 3]) < 1 / 255, (y, x)
+    assert_twin_agrees(r, [changed[i] for i in rng.choice(len(changed), 20, replace=False)])
 
 
 @pytest.mark.gpu
@@ -931,17 +937,12 @@ def test_a_chamfered_edges_outline_counts_its_back_once(r, monkeypatch, tmp_path
         area = on[..., 3].sum() / ref[..., 3].sum() - 1.0
         assert abs(area) < 0.005, f"{d}: {area:+.4f} " + dump(tmp_path, "prism", ref, on)
         diff = np.argwhere(np.abs(on - off).max(axis=-1) > 2 / 255)
-        changed += [(cam, on, y, x) for y, x in diff]
+        changed += [(tex, cam, on, y, x) for y, x in diff]
     assert all(a <= b + 0.002 for a, b in zip(errs["on"], errs["off"], strict=True)), errs
     assert np.mean(errs["on"]) < np.mean(errs["off"]) - 0.005, errs
     assert len(changed) > 40
     rng = np.random.default_rng(5)
-    for i in rng.choice(len(changed), 20, replace=False):
-        cam, img, y, x = changed[i]
-        dirs, t0, t1 = pixel_rays(cam, SIZE, tex.bounds)
-        rgb, alpha = march_ray_np(tex, cam.position, dirs[y, x], r.lighting, (t0[y, x], t1[y, x]),
-                                  pixel_angle=pixel_angle(cam, SIZE))  # fmt: skip
-        assert np.abs(rgb - img[y, x, :3]).max() < 1 / 255 and abs(alpha - img[y, x, 3]) < 1 / 255, (y, x)
+    assert_twin_agrees(r, [changed[i] for i in rng.choice(len(changed), 20, replace=False)])
 
 
 @pytest.mark.gpu
@@ -980,14 +981,9 @@ def test_a_bevel_between_two_creases_is_drawn_as_its_strip(r, monkeypatch, tmp_p
     assert np.mean(errs["on"]) < np.mean(errs["off"]) - 0.025, errs
     assert np.mean(rgb_errs["on"]) < np.mean(rgb_errs["off"]), rgb_errs
     assert len(changed) > 40
-    tex = aniso3d.build_texture(prism, 16, 16)
+    tex = aniso3d.build_texture(prism, 16, 16)  # as the default draws it (the rule on)
     rng = np.random.default_rng(6)
-    for i in rng.choice(len(changed), 20, replace=False):
-        cam, img, y, x = changed[i]
-        dirs, t0, t1 = pixel_rays(cam, SIZE, tex.bounds)
-        rgb, alpha = march_ray_np(tex, cam.position, dirs[y, x], r.lighting, (t0[y, x], t1[y, x]),
-                                  pixel_angle=pixel_angle(cam, SIZE))  # fmt: skip
-        assert np.abs(rgb - img[y, x, :3]).max() < 1 / 255 and abs(alpha - img[y, x, 3]) < 1 / 255, (y, x)
+    assert_twin_agrees(r, [(tex, *changed[i]) for i in rng.choice(len(changed), 20, replace=False)])
 
 
 @pytest.mark.gpu
@@ -1026,8 +1022,4 @@ def test_backs_partly_on_a_closed_surface_agree_with_the_twin(r):
         img, _ = render_float(r, tex, cam)
         partial = np.argwhere((img[..., 3] > 0.02) & (img[..., 3] < 0.98))
         assert len(partial) > 100
-        dirs, t0, t1 = pixel_rays(cam, SIZE, tex.bounds)
-        for y, x in partial[rng.choice(len(partial), 40, replace=False)]:
-            rgb, alpha = march_ray_np(tex, cam.position, dirs[y, x], r.lighting, (t0[y, x], t1[y, x]),
-                                      pixel_angle=pixel_angle(cam, SIZE))  # fmt: skip
-            assert np.abs(rgb - img[y, x, :3]).max() < 1 / 255 and abs(alpha - img[y, x, 3]) < 1 / 255, (d, y, x)
+        assert_twin_agrees(r, [(tex, cam, img, y, x) for y, x in partial[rng.choice(len(partial), 40, replace=False)]])
