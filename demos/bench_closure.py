@@ -43,8 +43,6 @@ The images are deterministic: no spread to report.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 import aniso3d.build.mesh as mesh_module
@@ -59,10 +57,10 @@ from aniso3d.bench.variants import (
     publish,
     run_corpus_demo,
     scene_cameras,
+    scene_or_mesh,
     scored,
 )
 from aniso3d.build import scenes
-from aniso3d.build.mesh import load_mesh
 from aniso3d.build.texture import build_texture
 from aniso3d.rendering.renderer import Renderer
 from aniso3d.rendering.splat.clips import texture_points
@@ -201,8 +199,7 @@ def pick_variants(args) -> dict:
 
 
 def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
-    mesh = load_mesh(name) if Path(name).suffix else scenes.get_scene(name)
-    label = Path(name).name if Path(name).suffix else name
+    mesh, label = scene_or_mesh(name)
     default_hole = mesh_module.HOLE_SHARE
     original = mesh_stream.face_topology
     variants = pick_variants(args)

@@ -49,7 +49,6 @@ then).
 from __future__ import annotations
 
 import importlib
-from pathlib import Path
 
 import numpy as np
 
@@ -63,10 +62,10 @@ from aniso3d.bench.variants import (
     publish,
     run_corpus_demo,
     scene_cameras,
+    scene_or_mesh,
     scored,
 )
 from aniso3d.build import scenes
-from aniso3d.build.mesh import load_mesh
 from aniso3d.build.texture import build_texture
 from aniso3d.rendering import volume
 from aniso3d.rendering.renderer import Renderer
@@ -111,8 +110,7 @@ def edge_error(truth_a: np.ndarray, img_a: np.ndarray, crop) -> float:
 
 
 def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
-    mesh = load_mesh(name) if Path(name).suffix else scenes.get_scene(name)
-    label = Path(name).name if Path(name).suffix else name
+    mesh, label = scene_or_mesh(name)
     tex = build_texture(mesh, args.resolution, args.directions)
     off, _ = RULES[args.rule]
     rule = {k: constant(k) for k in off}

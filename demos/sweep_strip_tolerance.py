@@ -17,8 +17,6 @@ while it is set (the strips are fitted at upload).
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from aniso3d.bench.outputs import markdown_table
 from aniso3d.bench.variants import (
     command,
@@ -28,10 +26,10 @@ from aniso3d.bench.variants import (
     publish,
     run_corpus_demo,
     scene_cameras,
+    scene_or_mesh,
     scored,
 )
 from aniso3d.build import scenes
-from aniso3d.build.mesh import load_mesh
 from aniso3d.build.texture import build_texture
 from aniso3d.rendering import sheet_strips
 from aniso3d.rendering.renderer import Renderer
@@ -44,8 +42,7 @@ def cell(row: dict, value: float) -> str:
 
 
 def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
-    mesh = load_mesh(name) if Path(name).suffix else scenes.get_scene(name)
-    label = Path(name).name if Path(name).suffix else name
+    mesh, label = scene_or_mesh(name)
     tex = build_texture(mesh, args.resolution, args.directions)
     keep = sheet_strips.STRIP_TOLERANCE
     rows = []

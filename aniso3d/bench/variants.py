@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Callable, Iterable
+from pathlib import Path
 
 import numpy as np
 
@@ -21,7 +22,7 @@ from aniso3d.bench.cameras import CameraSpec
 from aniso3d.bench.corpus import corpus_cameras
 from aniso3d.bench.outputs import write_between_markers
 from aniso3d.bench.run import ScenesRun, run_scenes
-from aniso3d.build.mesh import Mesh
+from aniso3d.build.mesh import Mesh, load_mesh
 from aniso3d.build.scenes import get_scene
 from aniso3d.build.texture import build_texture
 from aniso3d.rendering.renderer import Renderer
@@ -57,6 +58,15 @@ def scored(truth: np.ndarray, img: np.ndarray, spec: CameraSpec) -> Score:
     """PSNR and FLIP of ``img`` against ``truth`` inside the object's box, as the corpus bench scores."""
     m = metrics.compare_in_box(truth, img, spec.crop, with_flip=True)
     return m["psnr"], m["flip"]
+
+
+def scene_or_mesh(name: str) -> tuple[Mesh, str]:
+    """A demo's scene argument: a mesh file (by its suffix) or a built-in
+    scene's name; the mesh and the label its rows carry (the file's name)."""
+    path = Path(name)
+    if path.suffix:
+        return load_mesh(name), path.name
+    return get_scene(name), name
 
 
 def scene_cameras(renderer: Renderer, mesh: Mesh, name: str, args: argparse.Namespace):

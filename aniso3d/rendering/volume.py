@@ -734,16 +734,11 @@ def back_terms(
     where the closed part faces away from the eye (``sigma n . w > 0``),
     else 1; and (V,) what to take from each voxel's density, ``max(0,
     sum share A_cov sigma n . w)``. Mirrors composite() in volume.frag."""
-    sigma = closed_sign(texture, rows)
+    sigma, nwo = _closed_facing(texture, rows, w, thick)
     if thick is not None:
-        # As the GPU reads it back (stored_sign).
-        t = thick[rows]
-        sigma = np.where(t, np.sign(sigma) * (np.abs(stored_sign(sigma, t)) - THICK_CODE), sigma)
-        share = np.where(t, min(1.0, hide / BACK_HIDE), hide)
+        share = np.where(thick[rows], min(1.0, hide / BACK_HIDE), hide)
     else:
         share = np.full(len(sigma), float(hide))
-    n = np.asarray(texture.entry_normal, np.float32)[rows].astype(np.float64)
-    nwo = sigma * (n @ w)
     vis = np.where(nwo > 0.0, 1.0 - share * np.minimum(np.abs(sigma), 1.0), 1.0)
     v_dot_w = np.bincount(owner, share * covered_area(texture, rows) * nwo, minlength=n_voxels)
     return vis, np.maximum(v_dot_w, 0.0)
@@ -755,12 +750,23 @@ def back_share(texture: AnisoTexture, rows: np.ndarray, w: np.ndarray, thick: np
     where the closed part faces away from the eye, else 0. A run sums its
     sheets' backs apart from the rest and counts the larger (:func:`run_sides`).
     Mirrors composite() in volume.frag."""
+    sigma, nwo = _closed_facing(texture, rows, w, thick)
+    return np.where(RUN_BACK_APART & (nwo > 0.0), np.minimum(np.abs(sigma), 1.0), 0.0)
+
+
+def _closed_facing(
+    texture: AnisoTexture, rows: np.ndarray, w: np.ndarray, thick: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """(E,) the entries' closed signs ``sigma`` as the GPU reads them back
+    (a thick entry's stored moved out by THICK_CODE, :func:`stored_sign`)
+    and ``sigma n . w``, positive where the closed part faces away from
+    the eye: what :func:`back_terms` and :func:`back_share` read."""
     sigma = closed_sign(texture, rows)
     if thick is not None:
         t = thick[rows]
         sigma = np.where(t, np.sign(sigma) * (np.abs(stored_sign(sigma, t)) - THICK_CODE), sigma)
     n = np.asarray(texture.entry_normal, np.float32)[rows].astype(np.float64)
-    return np.where(RUN_BACK_APART & (sigma * (n @ w) > 0.0), np.minimum(np.abs(sigma), 1.0), 0.0)
+    return sigma, sigma * (n @ w)
 
 
 def covered_area(texture: AnisoTexture, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
@@ -1670,7 +1676,8 @@ def trace_ray_np(
             if a_s + a_f > 0.0:
                 col = (a_s * st.sheet_color[k] + a_f * st.cloud_color[k]) / (a_s + a_f)
         # A run crossed whole on its entering side, steeply, is settled (volume.frag).
-        settled = steep and run is not None and run_sides(run)[1][0] >= 1.0 and run_sides(run)[1][1] == 0.0
+        hit_sides = run_sides(run)[1] if steep and run is not None else None
+        settled = hit_sides is not None and hit_sides[0] >= 1.0 and hit_sides[1] == 0.0
         if not seg > 0.0:
             if settled:
                 close_run()
