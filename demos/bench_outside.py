@@ -8,9 +8,12 @@ their neighbours (a voxel export: every inner face a patch). Times
 ``closed_sides`` (the topology a build reads first) with the outside test
 and with it replaced by "open", over several runs, and prints the closed
 shares: the buildings' walls +1 and the floor plates between storeys 0;
-the block's outer faces +1, its inner ones 0.
+the block's outer faces +1, its inner ones 0. ``--subdivide K`` splits
+every face into 4^K first (a large mesh with few patches, as a scan with a
+fin or a dense CAD export is: the case where the rays are few and the
+faces many).
 
-    .venv/bin/python demos/bench_outside.py [--n 40 | --block 20] [--runs 5]
+    .venv/bin/python demos/bench_outside.py [--n 40 | --block 20] [--subdivide K] [--runs 5]
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ import os
 import time
 
 import numpy as np
+import trimesh
 
 import aniso3d.build.mesh as mesh_module
 from aniso3d.build import scenes
@@ -46,10 +50,18 @@ def block(n: int) -> tuple[np.ndarray, np.ndarray]:
     return v, f
 
 
+def subdivide(v: np.ndarray, f: np.ndarray, times: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every face split into 4^times (midpoints shared by the faces beside an edge)."""
+    for _ in range(times):
+        v, f = trimesh.remesh.subdivide(v, f)
+    return v, f
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=40, help="buildings along each side of the street grid")
     ap.add_argument("--block", type=int, default=0, help="instead: N^3 cubes sharing their faces")
+    ap.add_argument("--subdivide", type=int, default=0, help="split every face into 4^K first")
     ap.add_argument("--runs", type=int, default=5)
     args = ap.parse_args()
     if args.block:
@@ -58,6 +70,9 @@ def main() -> None:
     else:
         v, f = street(args.n)
         what = f"{args.n * args.n} buildings"
+    if args.subdivide:
+        v, f = subdivide(v, f, args.subdivide)
+        what += f", every face split into 4^{args.subdivide}"
     print(f"{what}, {len(f)} faces; load average {os.getloadavg()} at the start")
     original = mesh_module.outside_sides
     for name, fn in (("outside", original), ("open", lambda *a: np.zeros(len(a[4]), np.int8))):

@@ -95,3 +95,25 @@ def test_a_ray_through_an_edge_meets_one_of_its_faces():
     behind = front + [2.0, 0.0, 0.0]
     assert not caster.escapes(front).any()
     assert caster.escapes(behind).all()
+
+
+def test_dropping_the_faces_no_test_ray_can_meet_changes_no_answer():
+    """A caster told its rays' origins keeps only the faces whose (y, z) box
+    holds one of them; every ray's answer is the one the caster over every
+    face gives. Small random triangles in a cube, points among them (and on
+    some faces' corners), each direction both ways."""
+    rng = np.random.default_rng(7)
+    n = 3000
+    v = rng.random((n, 1, 3)) + 0.03 * rng.standard_normal((n, 3, 3))
+    v = v.reshape(-1, 3)
+    f = np.arange(3 * n).reshape(n, 3)
+    points = np.vstack([rng.random((400, 3)), v[rng.choice(len(v), 50)] + [0.0, 0.0, 1e-9]])
+    forward = rng.random(len(points)) < 0.5
+    for d in rng.standard_normal((4, 3)):
+        d /= np.linalg.norm(d)
+        every = _Caster(v, f, d)
+        culled = _Caster(v, f, d, near=points)
+        assert len(culled.ids) < 0.8 * len(every.ids)  # the cull drops faces here...
+        free = every.escapes(points, forward=forward)
+        assert 0.1 < free.mean() < 0.9  # ... and the rays meet some
+        np.testing.assert_array_equal(culled.escapes(points, forward=forward), free)
