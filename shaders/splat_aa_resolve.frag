@@ -14,7 +14,8 @@
 //     the pixel and its four neighbours reaches CLOSE_MEAN (CLOSE_MEAN_SIDED
 //     where the pixel holds a one-sided splat, u_visible's blue 0), a neighbour
 //     counting when its nearest surface starts less than CLOSE_REACH u_span
-//     slices from this one's (0 otherwise, and off the image): sub-pixel
+//     slices from this one's (0 otherwise, and off the image), and the
+//     pixel's own sum reaches CLOSE_OWN (a speck is not its surface): sub-pixel
 //     footprints (boxes at the splats' centres) do not tile a sheet exactly,
 //     so its sums scatter about 1 where it is whole, and what lies behind
 //     would show through every pixel below 1;
@@ -40,6 +41,9 @@
 #define CLOSE_MEAN 0.9
 #define CLOSE_REACH 3.0
 #define CLOSE_MEAN_SIDED 0.9
+#endif
+#ifndef CLOSE_OWN  // injected from aniso3d/rendering/splat/params.py (AA_CLOSE_OWN)
+#define CLOSE_OWN 0.1
 #endif
 
 uniform sampler2D u_layer[LAYERS];
@@ -86,8 +90,9 @@ float neighbour(ivec2 q, ivec2 size, float start) {
 // start, is whole (see the top). Four calls, not a loop over an array of
 // offsets: llvmpipe puts an indexed local array in memory.
 bool whole(ivec2 px, float own, float start, float mean) {
-    // Above 1 it is whole anyway; below 5 mean - 4 the neighbours cannot make it.
-    if (!(own >= 5.0 * mean - 4.0 && own < 1.0)) return false;
+    // Above 1 it is whole anyway; below 5 mean - 4 the neighbours cannot
+    // make it; below CLOSE_OWN it is a speck, not this pixel's surface.
+    if (!(own >= max(5.0 * mean - 4.0, CLOSE_OWN) && own < 1.0)) return false;
     ivec2 size = textureSize(u_layer[0], 0);
     float sum = own + neighbour(px + ivec2(1, 0), size, start) + neighbour(px - ivec2(1, 0), size, start)
               + neighbour(px + ivec2(0, 1), size, start) + neighbour(px - ivec2(0, 1), size, start);

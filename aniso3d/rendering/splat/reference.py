@@ -408,7 +408,8 @@ def closed_np(own: np.ndarray, start: np.ndarray, span: float, sided: np.ndarray
     sum of coverages ``own`` (H, W) and first slice ``start`` (H, W; inf
     where the pixel holds nothing); ``sided`` (H, W) bool: the pixel holds a
     one-sided splat drawn with its back culled (the mean is then
-    :data:`~aniso3d.rendering.splat.params.AA_CLOSE_SIDED`)."""
+    :data:`~aniso3d.rendering.splat.params.AA_CLOSE_SIDED`). The pixel's own
+    sum must reach :data:`~aniso3d.rendering.splat.params.AA_CLOSE_OWN`."""
     mean, reach = (float(x) for x in params.AA_CLOSE)
     min_mean = mean if sided is None else np.where(sided, float(params.AA_CLOSE_SIDED), mean)
     total = np.minimum(own, 1.0)
@@ -417,7 +418,7 @@ def closed_np(own: np.ndarray, start: np.ndarray, span: float, sided: np.ndarray
         with np.errstate(invalid="ignore"):
             same = (c > 0) & (np.abs(s - start) < reach * span)
         total += np.where(same, np.minimum(c, 1.0), 0.0)
-    return (own < 1.0) & (total >= 5.0 * min_mean)
+    return (own < 1.0) & (own >= float(params.AA_CLOSE_OWN)) & (total >= 5.0 * min_mean)
 
 
 def fragment_surfaces(frags: Fragments) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
