@@ -23,7 +23,7 @@ from aniso3d.build.points import PointCloud
 from aniso3d.build.pyramid import Pyramid, pyramid
 from aniso3d.build.scene import Scene, load_scene
 from aniso3d.build.texture import AnisoTexture, build_texture, sphere_directions
-from aniso3d.errors import Aniso3DError, FormatError, InputError, ResourceError
+from aniso3d.errors import Aniso3DError, FormatError, InputError, InputWarning, ResourceError
 from aniso3d.rendering.camera import Camera, turntable
 from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.lighting import Lighting
@@ -41,6 +41,7 @@ __all__ = [
     "FormatError",
     "GLContext",
     "InputError",
+    "InputWarning",
     "Lighting",
     "Mesh",
     "PointCloud",

@@ -21,3 +21,8 @@ class FormatError(InputError):
 
 class ResourceError(Aniso3DError, RuntimeError):
     """The machine cannot do what was asked (no OpenGL, not enough memory)."""
+
+
+class InputWarning(UserWarning):
+    """A file was read, but not all of it: a material library or texture it
+    names could not be found or decoded. The CLI prints these as one line."""

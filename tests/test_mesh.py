@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import numpy as np
 import pytest
+from PIL import Image
 
 from aniso3d import InputError, Mesh, load_mesh, scenes
 from aniso3d.build.mesh import DEFAULT_KD, DEFAULT_KS, DEFAULT_SHININESS, MAX_SHININESS, concatenate
@@ -417,3 +421,71 @@ def test_cube_and_sphere():
     with pytest.raises(InputError, match="unknown built-in scene"):
         scenes.get_scene("teapot")
     assert scenes.get_scene("quad").n_faces == 2
+
+
+def textured_quad(folder: Path, texture_path: str, mtl_path: str = "quad.mtl") -> Path:
+    """A unit quad with UVs whose material library (at ``mtl_path`` from the
+    OBJ's folder) names the texture ``texture_path`` (from the library's)."""
+    (folder / "quad.obj").write_text(
+        f"mtllib {mtl_path}\nusemtl painted\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+        "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"
+    )
+    return folder / "quad.obj"
+
+
+def red_texture(path: Path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    Image.new("RGB", (4, 4), (230, 20, 10)).save(path)
+
+
+def painted_mtl(path: Path, texture_path: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(f"newmtl painted\nKd 1 1 1\nmap_Kd {texture_path}\n")
+
+
+RED_KD = np.array([230, 20, 10]) / 255.0
+
+
+def test_a_texture_in_a_sibling_folder_is_read(tmp_path):
+    # Exporters write ../textures/x.png; trimesh 5 refuses paths that leave
+    # the mesh's folder unless told, and dropped the texture silently.
+    red_texture(tmp_path / "textures" / "red.png")
+    painted_mtl(tmp_path / "model" / "quad.mtl", "../textures/red.png")
+    m = load_mesh(textured_quad(tmp_path / "model", "../textures/red.png"))
+    np.testing.assert_allclose(m.kd, [RED_KD] * 2, atol=BYTE)
+
+
+@pytest.mark.skipif(not hasattr(os, "symlink"), reason="no symlinks here")
+def test_a_mesh_folder_of_symlinks_keeps_its_materials(tmp_path):
+    # A folder of links to files kept elsewhere (a dataset's view): the
+    # library and texture resolve to the other folder.
+    store = tmp_path / "store"
+    red_texture(store / "red.png")
+    painted_mtl(store / "quad.mtl", "red.png")
+    textured_quad(store, "red.png")
+    view = tmp_path / "view"
+    view.mkdir()
+    for name in ("quad.obj", "quad.mtl", "red.png"):
+        (view / name).symlink_to(store / name)
+    m = load_mesh(view / "quad.obj")
+    np.testing.assert_allclose(m.kd, [RED_KD] * 2, atol=BYTE)
+
+
+def test_a_missing_texture_is_one_warning_that_names_it(tmp_path, capsys):
+    from aniso3d import InputWarning
+    from aniso3d.app.cli import main
+
+    painted_mtl(tmp_path / "quad.mtl", "gone.png")
+    obj = textured_quad(tmp_path, "gone.png")
+    with pytest.warns(InputWarning, match="gone.png"):
+        m = load_mesh(obj)
+    np.testing.assert_allclose(m.kd, 1.0, atol=BYTE)  # the material's Kd
+    (tmp_path / "quad.mtl").unlink()
+    with pytest.warns(InputWarning, match="quad.mtl"):
+        load_mesh(obj)
+    # The CLI: one line on stderr, and the picture is still drawn.
+    code = main(["render", str(obj), "--method", "mesh", "--size", "32", "-o", str(tmp_path / "q.png")])
+    err = capsys.readouterr().err
+    assert code == 0 and (tmp_path / "q.png").exists()
+    lines = [line for line in err.splitlines() if "warning" in line]
+    assert len(lines) == 1 and lines[0].startswith("aniso3d render: warning: 'quad.obj'") and "quad.mtl" in lines[0]

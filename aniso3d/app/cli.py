@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 
 from aniso3d.app import bench_cmd, build_cmd, render_cmd, view_cmd
-from aniso3d.errors import Aniso3DError
+from aniso3d.errors import Aniso3DError, InputWarning
 from aniso3d.rendering.video import is_video_path
 
 
@@ -47,6 +48,20 @@ def _on_sigterm(signum, frame):
     raise _Terminated
 
 
+def _one_line_warnings(command: str, show):
+    """``warnings.showwarning`` that prints an
+    :class:`~aniso3d.errors.InputWarning` as one line on stderr (what was not
+    read, and what to do) and hands any other warning to ``show``."""
+
+    def one_line(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, InputWarning):
+            print(f"aniso3d {command}: warning: {message}", file=sys.stderr)
+        else:
+            show(message, category, filename, lineno, file, line)
+
+    return one_line
+
+
 def main(argv: list[str] | None = None) -> int:
     import signal
     import threading
@@ -56,7 +71,9 @@ def main(argv: list[str] | None = None) -> int:
     in_main = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _on_sigterm) if in_main else None
     try:
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():
+            warnings.showwarning = _one_line_warnings(args.command, warnings.showwarning)
+            return int(args.func(args) or 0)
     except Aniso3DError as exc:
         print(f"aniso3d {args.command}: error: {exc}", file=sys.stderr)
         return 2

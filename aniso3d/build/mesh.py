@@ -9,8 +9,10 @@ the per-face diffuse reflectance ``kd``.
 
 from __future__ import annotations
 
+import logging
 import os
 import re
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,7 +20,7 @@ import numpy as np
 
 from aniso3d.build.outside import outside_sides
 from aniso3d.build.ply import read_ply_header
-from aniso3d.errors import InputError
+from aniso3d.errors import InputError, InputWarning
 
 #: Diffuse reflectance of faces whose file carries no colour (a light grey).
 DEFAULT_KD = (0.7, 0.7, 0.7)
@@ -233,6 +235,73 @@ def concatenate(meshes: list[Mesh], name: str = "mesh") -> Mesh:
 
 MESH_SUFFIXES = {".obj", ".ply", ".stl", ".glb", ".gltf", ".off", ".dae", ".zae", ".3mf"}
 
+#: Formats whose files name others (material libraries, textures, buffers)
+#: by a path: read with those paths allowed anywhere, as the tools that write
+#: them read them (trimesh 5 refuses a path that leaves the mesh's folder,
+#: ``../textures/wood.png``, and a symlinked one whose target does, and drops
+#: the materials without a word).
+LINKED_SUFFIXES = {".obj", ".gltf", ".dae"}
+
+#: The starts of trimesh's (debug-level) log messages when a file a mesh
+#: names cannot be read.
+_ASSET_FAILURES = ("unable to load materials", "failed to load image")
+
+
+class _AssetFailures(logging.Filter):
+    """Collects what trimesh logs of the files a mesh names that it could
+    not read, while letting through only the records its logger would have
+    let through anyway."""
+
+    def __init__(self, passes: int):
+        super().__init__()
+        self.passes = passes
+        self.notes: list[str] = []
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        message = record.getMessage()
+        if message.startswith(_ASSET_FAILURES):
+            cause = record.exc_info[1] if record.exc_info else None
+            self.notes.append(f"{message.rstrip(': ')}" + (f" ({cause})" if cause else ""))
+        return record.levelno >= self.passes
+
+
+def _load_scene(p: Path):
+    """trimesh's scene of the file ``p``, with a warning
+    (:class:`~aniso3d.errors.InputWarning`) for every material library or
+    texture it names that could not be read."""
+    import trimesh
+    from trimesh.resolvers import FilePathResolver
+
+    # trimesh logs per module (trimesh.util, ...), at its package logger's
+    # level: lowered for the load, each module's records filtered where
+    # they are made.
+    log = logging.getLogger("trimesh")
+    level = log.level
+    notes = _AssetFailures(log.getEffectiveLevel())
+    loggers = [log] + [
+        logger for name, logger in logging.root.manager.loggerDict.items()
+        if name.startswith("trimesh.") and isinstance(logger, logging.Logger)
+    ]  # fmt: skip
+    for logger in loggers:
+        logger.addFilter(notes)
+    log.setLevel(logging.DEBUG)
+    try:
+        resolver = FilePathResolver(str(p), allow_anywhere=True) if p.suffix.lower() in LINKED_SUFFIXES else None
+        scene = trimesh.load(str(p), force="scene", process=False, resolver=resolver)
+    finally:
+        log.setLevel(level)
+        for logger in loggers:
+            logger.removeFilter(notes)
+    for note in dict.fromkeys(notes.notes):
+        warnings.warn(
+            InputWarning(
+                f"'{p.name}': {note}; its faces take their materials' colours or the default grey. "
+                "Keep the material library and images at the paths the file names"
+            ),
+            stacklevel=3,
+        )
+    return scene
+
 
 def _missing_module(exc: ImportError) -> str:
     """The module an ImportError says is missing: trimesh re-raises them
@@ -285,7 +354,7 @@ def load_mesh(path: str | os.PathLike, name: str | None = None) -> Mesh:
     if suffix == ".stl":
         _check_binary_stl_size(p)
     try:
-        scene = trimesh.load(str(p), force="scene", process=False)
+        scene = _load_scene(p)
     except ImportError as exc:  # an optional reader (3MF, COLLADA), or a fallback for bad data
         name = _missing_module(exc)
         raise InputError(
