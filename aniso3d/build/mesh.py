@@ -242,9 +242,11 @@ MESH_SUFFIXES = {".obj", ".ply", ".stl", ".glb", ".gltf", ".off", ".dae", ".zae"
 #: the materials without a word).
 LINKED_SUFFIXES = {".obj", ".gltf", ".dae"}
 
-#: The starts of trimesh's (debug-level) log messages when a file a mesh
-#: names cannot be read.
-_ASSET_FAILURES = ("unable to load materials", "failed to load image")
+#: trimesh's (mostly debug-level) log messages when a material, texture or
+#: colour a mesh names cannot be read ("unable to load materials from: x.mtl",
+#: "failed to load image", "unable to load base texture", ...; not the
+#: bump or emissive maps, which aniso3d does not use).
+_ASSET_FAILURES = re.compile(r"^(unable|failed) to (load|convert) (materials|image|base texture|textures|colou?rs?)")
 
 
 class _AssetFailures(logging.Filter):
@@ -259,9 +261,9 @@ class _AssetFailures(logging.Filter):
 
     def filter(self, record: logging.LogRecord) -> bool:
         message = record.getMessage()
-        if message.startswith(_ASSET_FAILURES):
+        if _ASSET_FAILURES.match(message):
             cause = record.exc_info[1] if record.exc_info else None
-            self.notes.append(f"{message.rstrip(': ')}" + (f" ({cause})" if cause else ""))
+            self.notes.append(f"{message.rstrip(': !')}" + (f" ({cause})" if cause else ""))
         return record.levelno >= self.passes
 
 
