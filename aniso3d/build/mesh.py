@@ -242,11 +242,11 @@ MESH_SUFFIXES = {".obj", ".ply", ".stl", ".glb", ".gltf", ".off", ".dae", ".zae"
 #: the materials without a word).
 LINKED_SUFFIXES = {".obj", ".gltf", ".dae"}
 
-#: trimesh's (mostly debug-level) log messages when a material, texture or
-#: colour a mesh names cannot be read ("unable to load materials from: x.mtl",
-#: "failed to load image", "unable to load base texture", ...; not the
-#: bump or emissive maps, which aniso3d does not use).
-_ASSET_FAILURES = re.compile(r"^(unable|failed) to (load|convert) (materials|image|base texture|textures|colou?rs?)")
+#: trimesh's (mostly debug-level) log messages when a material library or
+#: texture a mesh names cannot be read ("unable to load materials from:
+#: x.mtl", "failed to load image", "unable to load base texture", ...; not
+#: the bump or emissive maps, which aniso3d does not use).
+_ASSET_FAILURES = re.compile(r"^(unable|failed) to load (materials|image|base texture|textures)")
 
 
 class _AssetFailures(logging.Filter):
@@ -268,9 +268,8 @@ class _AssetFailures(logging.Filter):
 
 
 def _load_scene(p: Path):
-    """trimesh's scene of the file ``p``, with a warning
-    (:class:`~aniso3d.errors.InputWarning`) for every material library or
-    texture it names that could not be read."""
+    """trimesh's scene of the file ``p`` and what could not be read of the
+    material libraries and textures it names (one line each)."""
     import trimesh
     from trimesh.resolvers import FilePathResolver
 
@@ -294,15 +293,7 @@ def _load_scene(p: Path):
         log.setLevel(level)
         for logger in loggers:
             logger.removeFilter(notes)
-    for note in dict.fromkeys(notes.notes):
-        warnings.warn(
-            InputWarning(
-                f"'{p.name}': {note}; its faces take their materials' colours or the default grey. "
-                "Keep the material library and images at the paths the file names"
-            ),
-            stacklevel=3,
-        )
-    return scene
+    return scene, list(dict.fromkeys(notes.notes))
 
 
 def _missing_module(exc: ImportError) -> str:
@@ -356,7 +347,7 @@ def load_mesh(path: str | os.PathLike, name: str | None = None) -> Mesh:
     if suffix == ".stl":
         _check_binary_stl_size(p)
     try:
-        scene = _load_scene(p)
+        scene, unread = _load_scene(p)
     except ImportError as exc:  # an optional reader (3MF, COLLADA), or a fallback for bad data
         name = _missing_module(exc)
         raise InputError(
@@ -397,6 +388,16 @@ def load_mesh(path: str | os.PathLike, name: str | None = None) -> Mesh:
         raise InputError(
             f"mesh file '{p}' holds no triangles (only points, lines or nothing): "
             "it is truncated, or not a surface mesh; aniso3d needs triangles or polygons"
+        )
+    # Read whole but for some of its materials: say so (after every check
+    # above, so that a file refused is one error, not a warning and an error).
+    for note in unread:
+        warnings.warn(
+            InputWarning(
+                f"'{p.name}': {note}; its faces take their materials' colours or the default grey. "
+                "Keep the material library and images at the paths the file names"
+            ),
+            stacklevel=2,
         )
     return concatenate(parts, name=name or p.stem)
 
