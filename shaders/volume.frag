@@ -73,7 +73,8 @@ vec3 g_light_dir[4];
 // infinite ray parameter), RUN_SHARE, RUN_GAP, RUN_PARALLEL, RUN_STEEP and RUN_GRAZE
 // (the runs of surface sheets: render/volume.py:sheet_terms), RUN_BACK_MIN and
 // RUN_BACK_APART (a closed back's colour, and its coverage counted apart:
-// render/volume.py), HALF_C_RANGE
+// render/volume.py), RUN_DEFER (what lies behind an open run's crossed
+// surface goes behind it: render/volume.py), HALF_C_RANGE
 // and HALF_PIXELS (half-planes: render/sheet_halfplanes.py), STRIP_PIXELS
 // (strips: render/sheet_strips.py), CREASE_BIT and FACE_CUT_BIT (entry word
 // 11's flags of a crease sheet's halo and of a line halo cut by its face:
@@ -223,6 +224,12 @@ vec4 g_run_far;    // the far side's part of g_run_col (rgb) and g_run_w (w)
 float g_run_wr;    // g_run_w's weights before the share of its colour each
                    // sheet shows (a closed back: vis, at least RUN_BACK_MIN)
 float g_run_far_raw;  // ... the far side's (g_run_far.w: after it)
+float g_run_hit_t; // where its centre ray first crossed a whole sheet on its entering side
+// RUN_DEFER (render/volume.py): what lies behind the open run's crossed
+// surface, composited as a layer behind the run when it closes.
+vec3 g_behind_col;    // premultiplied colour
+float g_behind_trans; // transmittance
+float g_behind_t;     // ray parameter (from o) where it began
 
 // Share in [0, 1] of a pixel's footprint, offsets o in [-half_w, half_w]
 // along the sheet's normal from the centre ray, whose rays cross the sheet's
@@ -297,19 +304,31 @@ void close_run() {
     if (!g_run) return;
     g_run = false;
     float cov = run_coverage();
-    if (!(cov > 0.0) || !(g_run_w > 0.0)) return;
-    float seg = g_trans * cov;
-    if (!g_has50 && g_trans > 0.5 && g_trans - seg <= 0.5) {
-        g_t50 = g_run_tw / g_run_w;
-        g_has50 = true;
+    if (cov > 0.0 && g_run_w > 0.0) {
+        float seg = g_trans * cov;
+        if (!g_has50 && g_trans > 0.5 && g_trans - seg <= 0.5) {
+            g_t50 = g_run_tw / g_run_w;
+            g_has50 = true;
+        }
+        // A run whose near side is a thick solid's hidden back alone follows
+        // that solid's front, drawn in part: it shows the colour seen so far.
+        float near_w = g_run_w - g_run_far.w;
+        float near_raw = g_run_wr - g_run_far_raw;
+        bool hidden = g_trans < 1.0 && near_raw > 0.0 && near_w < near_raw && near_w <= 1.5 * RUN_BACK_MIN * near_raw;
+        g_color += seg * (hidden ? g_color / (1.0 - g_trans) : run_color());
+        g_trans -= seg;
     }
-    // A run whose near side is a thick solid's hidden back alone follows
-    // that solid's front, drawn in part: it shows the colour seen so far.
-    float near_w = g_run_w - g_run_far.w;
-    float near_raw = g_run_wr - g_run_far_raw;
-    bool hidden = g_trans < 1.0 && near_raw > 0.0 && near_w < near_raw && near_w <= 1.5 * RUN_BACK_MIN * near_raw;
-    g_color += seg * (hidden ? g_color / (1.0 - g_trans) : run_color());
-    g_trans -= seg;
+    // What lay behind its surface (RUN_DEFER), behind it.
+    if (g_behind_trans < 1.0) {
+        if (!g_has50 && g_trans > 0.5 && g_trans * g_behind_trans <= 0.5) {
+            g_t50 = g_behind_t;
+            g_has50 = true;
+        }
+        g_color += g_trans * g_behind_col;
+        g_trans *= g_behind_trans;
+        g_behind_col = vec3(0.0);
+        g_behind_trans = 1.0;
+    }
 }
 
 // Share of the pixel's footprint (width foot, grid units across the ray) on
@@ -650,6 +669,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                                 g_run_wr = 0.0;
                                 g_run_w = 0.0;
                                 g_run_tw = 0.0;
+                                g_run_hit_t = BIG;
                             }
                             g_run_end = t0 + chord;
                             in_run = true;
@@ -685,6 +705,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                             } else {
                                 g_run_hit[side] += fh * (1.0 - bk);
                                 g_run_hit[2 + side] += fh * bk;
+                                if (hit && side == 0) g_run_hit_t = min(g_run_hit_t, t0 + th);
                             }
                             steep = steep || (hit && abs(nw) >= RUN_STEEP);
                         }
@@ -795,6 +816,18 @@ void composite(int v, vec3 x_in, float t0, float chord) {
     // could only follow within RUN_GAP through an object under a voxel thick.
     vec2 run_hit = run_sides().zw;
     bool settled = steep && run_hit.x >= 1.0 && run_hit.y == 0.0;
+    if (RUN_DEFER != 0 && u_opacity_mode == 3 && g_run && seg > 0.0 && g_trans > 0.0) {
+        float here = t0 + (crossed > 0.0 ? t_cross / crossed : 0.5 * chord);
+        if (run_hit.x >= 1.0 && run_hit.y == 0.0 && g_run_hit_t <= here) {
+            // Behind the run's surface: a layer behind it (RUN_DEFER).
+            float a = seg / g_trans;
+            if (g_behind_trans == 1.0) g_behind_t = here;
+            g_behind_col += g_behind_trans * a * color;
+            g_behind_trans *= 1.0 - a;
+            if (settled) close_run();
+            return;
+        }
+    }
     if (!(seg > 0.0)) {
         if (settled) close_run();
         return;
@@ -914,6 +947,9 @@ void main() {
     g_has50 = false;
     g_run = false;
     g_run_end = 0.0;
+    g_behind_col = vec3(0.0);
+    g_behind_trans = 1.0;
+    g_behind_t = 0.0;
 
 #ifdef PLAIN_MARCH
     ivec3 bcell, bstep, cell, stp;

@@ -321,6 +321,15 @@ RUN_BACK_MIN = 1e-3
 #: too wide. False: summed with the rest, as before (docs/coverage.md, "A
 #: solid's back counted once").
 RUN_BACK_APART = True
+#: What a voxel adds outside the open run (its partial sheets and cloud)
+#: where the run's centre ray has crossed whole sheets on its entering side
+#: only, before that voxel's crossings, lies behind the run's surface: it is
+#: composited as a layer behind the run when the run closes. It was
+#: composited at once, in front of the run: where two solids touch (a
+#: building's storeys and parts, an assembly), the face between them, a
+#: partial sheet in the wall's or roof's voxels, drew a line across the
+#: surface (bright or dark by its shading). False: at once, as before.
+RUN_DEFER = True
 #: A run closes when the ray has gone this far (grid units) past its last
 #: voxel: a surface cut by voxel faces, or a silhouette's near and far sides,
 #: lie in voxels a cell's diagonal apart at most along the ray.
@@ -1573,6 +1582,9 @@ def trace_ray_np(
     # edge cuts, the largest halo; colour, weight, weighted t (from the eye),
     # and the far side's colour and weight (run_color).
     run: dict | None = None
+    # RUN_DEFER: what lies behind the open run's crossed surface, a layer
+    # (premultiplied colour, transmittance, the ray parameter where it began).
+    behind = {"col": np.zeros(3), "trans": 1.0, "t": 0.0}
 
     def run_sheets() -> float:
         return run_coverage(*run_sides(run))
@@ -1587,6 +1599,12 @@ def trace_ray_np(
                     out.t50 = run["tw"] / run["w"] * h
                 C = C + seg * (C / (1.0 - T) if hidden_run(run, T) else run_color(run))
                 T -= seg
+            if behind["trans"] < 1.0:
+                if out.t50 is None and T > 0.5 and T * behind["trans"] <= 0.5:
+                    out.t50 = behind["t"] * h
+                C = C + T * behind["col"]
+                T *= behind["trans"]
+                behind.update(col=np.zeros(3), trans=1.0)
         run = None
 
     for k, ((v, ti, chord, _, _, _), D, col) in enumerate(zip(hits, dens, cols, strict=True)):
@@ -1625,7 +1643,7 @@ def trace_ray_np(
                     whole = ~e["edge"] & ~e["halo"]
                     steep = bool(((e["hit"] > 0.0) & whole & (np.abs(e["nw"]) >= RUN_STEEP)).any())
                     if run is None:
-                        run = {"ref": e["normal"][0], "band": np.zeros(2), "hit": np.zeros(2),
+                        run = {"ref": e["normal"][0], "band": np.zeros(2), "hit": np.zeros(2), "hit_t": np.inf,
                                "band_back": np.zeros(2), "hit_back": np.zeros(2),
                                "edge": np.zeros(4), "halo": 0.0, "col": np.zeros(3), "w": 0.0,
                                "far_col": np.zeros(3), "far_w": 0.0, "far_wr": 0.0, "wr": 0.0,
@@ -1644,6 +1662,10 @@ def trace_ray_np(
                         run["hit" + key] = run["hit" + key] + np.bincount(other[whole], hit_p * ~graze[whole],
                                                                           minlength=2)  # fmt: skip
                         run["hit" + key] = run["hit" + key] + float((hit_p * graze[whole]).sum())
+                    # Where the centre ray first crossed a whole sheet on the entering side (RUN_DEFER).
+                    first = whole & (e["hit"] > 0.0) & ~graze & (other == 0)
+                    if first.any():
+                        run["hit_t"] = min(run["hit_t"], float((e["t"][first] + ti).min()))
                     # Sheets an edge cuts: the largest per side (a silhouette's
                     # crease: its two faces overlap); halos: the largest.
                     # (No grazing rule for them: volume.frag.)
@@ -1678,6 +1700,22 @@ def trace_ray_np(
         # A run crossed whole on its entering side, steeply, is settled (volume.frag).
         hit_sides = run_sides(run)[1] if steep and run is not None else None
         settled = hit_sides is not None and hit_sides[0] >= 1.0 and hit_sides[1] == 0.0
+        if RUN_DEFER and opacity == "planar" and run is not None and seg > 0.0 and T > 0.0:
+            sides = run_sides(run)[1]
+            here = ti + (st.t_cross[k] if st.crossed[k] > 0.0 else 0.5 * chord)
+            if sides[0] >= 1.0 and sides[1] == 0.0 and run["hit_t"] <= here:
+                # Behind the run's surface: a layer behind it (RUN_DEFER).
+                a = seg / T
+                if behind["trans"] == 1.0:
+                    behind["t"] = here
+                behind["col"] = behind["col"] + behind["trans"] * a * np.asarray(col, np.float64)
+                behind["trans"] *= 1.0 - a
+                out.voxels.append(v)
+                out.t_enter.append(ti * h)
+                out.chords.append(chord * h)
+                if settled:
+                    close_run()
+                continue
         if not seg > 0.0:
             if settled:
                 close_run()
@@ -2027,6 +2065,7 @@ class VolumeRenderer:
             "RUN_GAP": RUN_GAP,
             "RUN_BACK_MIN": RUN_BACK_MIN,
             "RUN_BACK_APART": int(RUN_BACK_APART),
+            "RUN_DEFER": int(RUN_DEFER),
             "GRID_PAD": GRID_PAD,
             "CLIP_MARGIN": CLIP_MARGIN,
             "HALF_C_RANGE": HALF_C_RANGE,
