@@ -34,6 +34,9 @@ lies within ``STRIP_TOLERANCE`` 0.2 voxel of its facets'; off, 0.03.
 ``--rule defer``: what a voxel adds outside the open run behind the run's
 crossed surface goes behind the run (``RUN_DEFER``: the face between two
 touching solids drew a line across their walls); off, False: at once.
+``--rule front``: a run's sheets crossed after the voxel's first whole
+surface sheet add nothing to its colour (``RUN_FRONT_GAP``: a wall and the
+face behind it in one voxel mixed their colours); off, None.
 
 Per scene (corpus names, or mesh files), at the corpus bench's two cameras
 (*close*: the object filling the image; *minified*: a voxel about a pixel),
@@ -46,7 +49,7 @@ rule off in the second (each uploads the texture once, with the rule as set
 then).
 
     .venv/bin/python demos/bench_volume_creases.py [SCENE | MESH FILE ...] [--size 512]
-        [--rule crease|thick|back|lines|foot|range|split|apart|strips|tolerance|defer] [--md docs/coverage.md]
+        [--rule crease|thick|back|lines|foot|range|split|apart|strips|tolerance|defer|front] [--md docs/coverage.md]
 """
 
 from __future__ import annotations
@@ -85,7 +88,8 @@ RULES = {"crease": ({"SHEET_CREASE": 0.0}, "bench_volume_creases"),
          "apart": ({"RUN_BACK_APART": False}, "bench_volume_backs_apart"),
          "strips": ({"CREASE_STRIPS": False}, "bench_volume_crease_strips"),
          "tolerance": ({"sheet_strips.STRIP_TOLERANCE": 0.03}, "bench_volume_strip_tolerance"),
-         "defer": ({"RUN_DEFER": False}, "bench_volume_run_defer")}  # fmt: skip
+         "defer": ({"RUN_DEFER": False}, "bench_volume_run_defer"),
+         "front": ({"RUN_FRONT_GAP": None}, "bench_volume_run_front")}  # fmt: skip
 
 
 def _where(name: str):

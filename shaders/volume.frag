@@ -74,7 +74,9 @@ vec3 g_light_dir[4];
 // (the runs of surface sheets: render/volume.py:sheet_terms), RUN_BACK_MIN and
 // RUN_BACK_APART (a closed back's colour, and its coverage counted apart:
 // render/volume.py), RUN_DEFER (what lies behind an open run's crossed
-// surface goes behind it: render/volume.py), HALF_C_RANGE
+// surface goes behind it) and RUN_FRONT_GAP, RUN_FRONT_FILL (a run's
+// sheets behind its voxel's first whole one add no colour: render/volume.py),
+// HALF_C_RANGE
 // and HALF_PIXELS (half-planes: render/sheet_halfplanes.py), STRIP_PIXELS
 // (strips: render/sheet_strips.py), CREASE_BIT and FACE_CUT_BIT (entry word
 // 11's flags of a crease sheet's halo and of a line halo cut by its face:
@@ -543,6 +545,31 @@ void composite(int v, vec3 x_in, float t0, float chord) {
     // planar: the backs of closed surfaces (render/volume.py:back_terms).
     float hide = u_opacity_mode == 3 ? u_back_hide : 0.0;
     float v_dot_w = 0.0;       // V . w: the hidden share of the closed facets' outward vector area along the ray
+    // planar: where the centre ray first crosses a whole surface sheet of
+    // the voxel with no edge or half-plane of its own; the run's sheets
+    // crossed after it add nothing to its colour (render/volume.py:RUN_FRONT_GAP).
+    float front_t = BIG;
+    if (RUN_FRONT_GAP >= 0.0 && sheets && u_opacity_mode == 3 && foot > 0.0 && e1 - e0 >= 2u) {
+        for (uint e = e0; e < e1; ++e) {
+            uvec4 sh = ENT(4u * e + 2u);
+            vec2 fill_share = unpackHalf2x16(sh.y);
+            // Not a halo, a surface sheet, no half-plane word, no edges on faces.
+            if (((sh.w >> 8u) & 7u) != 7u || fill_share.y < RUN_SHARE || (sh.w >> 31u) != 0u || (sh.w & 0x77u) != 0x77u)
+                continue;
+            float share = 1.0 - (1.0 - fill_share.y) * (1.0 - zoom);
+            vec2 area_slack = unpackHalf2x16(sh.z);
+            if (share * fill_share.x < RUN_FRONT_FILL || !(share * area_slack.x > 0.0)) continue;
+            vec3 n = uintBitsToFloat(ENT(4u * e).xyz);
+            float len_n = length(n);
+            vec3 nh = len_n > 0.0 ? n / len_n : vec3(0.0);
+            float nw = dot(nh, g_d);
+            if (abs(nw) < RUN_GRAZE) continue;
+            float s_in = dot(nh, x_in) - uintBitsToFloat(sh.x);
+            float s_out = s_in + nw * chord;
+            if (-max(s_in, s_out) - area_slack.y <= 0.0 && -min(s_in, s_out) + area_slack.y >= 0.0)
+                front_t = min(front_t, clamp(-s_in / nw, 0.0, chord));
+        }
+    }
     for (uint e = e0; e < e1; ++e) {
         uvec4 a = ENT(4u * e);
         uvec4 b = ENT(4u * e + 1u);
@@ -712,6 +739,8 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                         // A halo is not hidden by the sheets before it (it
                         // lies beside them on screen, past an edge).
                         float wr = halo ? weight : run_open * weight;
+                        // Hidden behind the voxel's first whole sheet (RUN_FRONT_GAP).
+                        if (!halo && th > front_t + RUN_FRONT_GAP) wr = 0.0;
                         // A closed surface's back (vis < 1) keeps its
                         // coverage but hardly colours its side.
                         float shown = max(vis, RUN_BACK_MIN);

@@ -330,6 +330,16 @@ RUN_BACK_APART = True
 #: partial sheet in the wall's or roof's voxels, drew a line across the
 #: surface (bright or dark by its shading). False: at once, as before.
 RUN_DEFER = True
+#: Within a voxel, a run's sheet that the centre ray crosses more than this
+#: (grid units) after it crosses a whole surface sheet of the voxel (fill at
+#: least :data:`RUN_FRONT_FILL`, not grazing, no edge or half-plane of its
+#: own) is hidden by that sheet: it keeps its coverage but adds nothing to
+#: the run's colour. A run weighs its sheets by what it left uncovered
+#: before their voxel, so two surfaces in one voxel (a wall and the face
+#: between two touching solids behind it, a concave corner's wall and floor)
+#: mixed their colours. None: as before.
+RUN_FRONT_GAP: float | None = 1e-3
+RUN_FRONT_FILL = 0.99
 #: A run closes when the ray has gone this far (grid units) past its last
 #: voxel: a surface cut by voxel faces, or a silhouette's near and far sides,
 #: lie in voxels a cell's diagonal apart at most along the ray.
@@ -1143,8 +1153,13 @@ def sheet_terms(
                 strip_cover(stp.angle[re], stp.lo[re], stp.hi[re], sh.offset[at][e], p, nh[e], w, STRIP_FOOT * foot[e]),
                 halfplane_ramp(hpl.angle[re], hpl.offset[re], sh.offset[at][e], p, nh[e], w, foot[e]),
             )
+        # A whole sheet the centre ray crosses, with no edge or half-plane of
+        # its own: it hides the voxel's run sheets crossed after it (RUN_FRONT_GAP).
+        faced = (layout.edges.face[rows] >= 0).any(axis=1) if layout is not None else np.zeros(len(rows), bool)
+        plain = ~layout.halfplanes.mask[rows] & ~layout.strips.mask[rows] if layout is not None else True
+        front = surface & hit & plain & ~faced & (fill >= RUN_FRONT_FILL) & (np.abs(nw) >= RUN_GRAZE)
         keep = (counted > 0.0) | (weight > 0.0)
-        run = {"voxel": owner[keep], "normal": nh[keep], "nw": nw[keep], "band": band[keep],
+        run = {"voxel": owner[keep], "normal": nh[keep], "nw": nw[keep], "band": band[keep], "front": front[keep],
                "hit": np.where(hit, fill * ramp[:, 0], 0.0)[keep], "counted": counted[keep],
                "weight": weight[keep], "color": run_c[keep], "t": t_hit[keep],
                "edge": (ramp[:, 0] < 1.0)[keep], "halo": np.zeros(int(keep.sum()), dtype=bool),
@@ -1171,7 +1186,8 @@ def sheet_terms(
     )
     if run is None:
         run = {k: np.zeros(0) for k in ("voxel", "nw", "band", "hit", "counted", "weight", "t", "vis", "back")}
-        run.update(normal=np.zeros((0, 3)), color=np.zeros((0, 3)), edge=np.zeros(0, bool), halo=np.zeros(0, bool))
+        run.update(normal=np.zeros((0, 3)), color=np.zeros((0, 3)), edge=np.zeros(0, bool), halo=np.zeros(0, bool),
+                   front=np.zeros(0, bool))
         run["voxel"] = run["voxel"].astype(np.int64)
     return SheetTerms(projected, crossed, t_cross, sheet_color, cloud_color, run, back)
 
@@ -1245,7 +1261,7 @@ def _with_halos(run, layout, halos, texture, w, lighting, normal, x_in, chords, 
     halo_run = {"voxel": owner[ok], "normal": nh[ok], "nw": nw[ok], "band": (fill * band_all * ramp[:, 0])[ok],
                 "hit": np.where(hit, fill * ramp[:, 0], 0.0)[ok], "counted": counted[ok], "weight": weight[ok],
                 "color": c[ok], "t": t_hit[ok], "edge": np.zeros(int(ok.sum()), bool),
-                "halo": np.ones(int(ok.sum()), bool), "vis": vis[ok],
+                "halo": np.ones(int(ok.sum()), bool), "vis": vis[ok], "front": np.zeros(int(ok.sum()), bool),
                 "back": back_share(texture, src[ok], w, layout.thick)}  # fmt: skip
     # Each voxel's own sheets, then its halos (as the GPU lists them).
     order = np.argsort(np.concatenate([run["voxel"], halo_run["voxel"]]), kind="stable")
@@ -1680,6 +1696,10 @@ def trace_ray_np(
                     # A closed surface's back keeps its coverage but hardly
                     # colours its side (RUN_BACK_MIN).
                     wr = np.where(e["halo"], 1.0, open_) * e["weight"]
+                    if RUN_FRONT_GAP is not None and e["front"].any():
+                        # Hidden behind the voxel's first whole sheet (RUN_FRONT_GAP).
+                        first_t = float(e["t"][e["front"]].min())
+                        wr = np.where(~e["halo"] & (e["t"] > first_t + RUN_FRONT_GAP), 0.0, wr)
                     wc = wr * np.maximum(e["vis"], RUN_BACK_MIN)
                     run["col"] = run["col"] + wc @ e["color"]
                     run["w"] += float(wc.sum())
@@ -2066,6 +2086,8 @@ class VolumeRenderer:
             "RUN_BACK_MIN": RUN_BACK_MIN,
             "RUN_BACK_APART": int(RUN_BACK_APART),
             "RUN_DEFER": int(RUN_DEFER),
+            "RUN_FRONT_GAP": -1.0 if RUN_FRONT_GAP is None else float(RUN_FRONT_GAP),
+            "RUN_FRONT_FILL": RUN_FRONT_FILL,
             "GRID_PAD": GRID_PAD,
             "CLIP_MARGIN": CLIP_MARGIN,
             "HALF_C_RANGE": HALF_C_RANGE,
