@@ -489,3 +489,18 @@ def test_a_missing_texture_is_one_warning_that_names_it(tmp_path, capsys):
     assert code == 0 and (tmp_path / "q.png").exists()
     lines = [line for line in err.splitlines() if "warning" in line]
     assert len(lines) == 1 and lines[0].startswith("aniso3d render: warning: 'quad.obj'") and "quad.mtl" in lines[0]
+
+
+def test_a_face_takes_its_textures_mean_not_one_texel(tmp_path):
+    """A texture of thin lines (one texel in eight lit, the rest black):
+    each of the quad's two faces covers many lines and takes their mean
+    (about 1/8 of the line colour), where the texel at its centroid gave
+    full colour or black depending on where the centroid fell."""
+    img = np.zeros((64, 64, 3), np.uint8)
+    img[:, ::8] = (240, 200, 40)
+    (tmp_path / "lines.png").parent.mkdir(exist_ok=True)
+    Image.fromarray(img).save(tmp_path / "lines.png")
+    painted_mtl(tmp_path / "quad.mtl", "lines.png")
+    m = load_mesh(textured_quad(tmp_path, "lines.png"))
+    want = np.array([240, 200, 40]) / 255.0 / 8.0
+    np.testing.assert_allclose(m.kd, [want] * 2, atol=0.02)

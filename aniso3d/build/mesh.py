@@ -3,7 +3,7 @@
 A :class:`Mesh` is the plain data object every later stage starts from. Loading
 goes through trimesh; scenes are flattened into one mesh with their transforms
 applied, and whatever colour information a file has (face colours, vertex
-colours, material colours, a texture sampled at each face's centroid) becomes
+colours, material colours, a texture's mean over each face) becomes
 the per-face diffuse reflectance ``kd``.
 """
 
@@ -329,7 +329,7 @@ def load_mesh(path: str | os.PathLike, name: str | None = None) -> Mesh:
 
     Scenes are flattened into one mesh with their node transforms applied.
     Per-face ``kd`` comes from, in order: face colours, vertex colours (averaged
-    per face), a texture image sampled at each face's UV centroid, the material's
+    per face), a texture image's mean over each face (:func:`_sample_texture`), the material's
     main colour, else :data:`DEFAULT_KD`. ``ks`` and the Phong exponent come
     from the material where it has them (OBJ ``Ks``/``Ns``; glTF roughness
     mapped to an exponent; at least :data:`LEAST_SHININESS`), else
@@ -467,7 +467,7 @@ def _from_trimesh(tm, name: str = "mesh") -> Mesh:
             image = _material_image(mat)
             uv = getattr(visual, "uv", None)
             if image is not None and uv is not None and len(uv) == len(tm.vertices):
-                kd = _sample_texture(image, np.asarray(uv, dtype=np.float64)[tm.faces].mean(axis=1))
+                kd = _sample_texture(image, np.asarray(uv, dtype=np.float64)[tm.faces])
                 if kd_t is not None and _is_pbr(mat):
                     kd = kd * kd_t  # glTF multiplies the base colour texture by its factor
     return Mesh(np.asarray(tm.vertices), np.asarray(tm.faces), kd, ks, sh, name)
@@ -520,18 +520,77 @@ def _material_image(mat):
     return None
 
 
+#: A face's colour from its texture is the mean of the texels under it: it
+#: is sampled at the centroids of the n x n equal triangles that split it,
+#: n the power of two (at most this) that puts a sample about every two
+#: texels, each sample read from the texture's mip level whose texels are
+#: about the samples' spacing (a box filter over the face; a face over a few
+#: texels: its centroid's texel). One texel at the centroid aliased:
+#: trimesh's capsule, thin grid lines on black, came out as faces at random
+#: full colour or black.
+TEXTURE_SPLIT_MAX = 8
+
+
+def _split_centroids(n: int) -> np.ndarray:
+    """(n^2, 3) barycentric centroids of the n^2 equal triangles a triangle
+    splits into (each edge in n)."""
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    up = (i + j <= n - 1).ravel()
+    down = (i + j <= n - 2).ravel()
+    a = np.concatenate([(i.ravel()[up] + 1 / 3) / n, (i.ravel()[down] + 2 / 3) / n])
+    b = np.concatenate([(j.ravel()[up] + 1 / 3) / n, (j.ravel()[down] + 2 / 3) / n])
+    return np.stack([1.0 - a - b, a, b], axis=1)
+
+
+def _mip_levels(arr: np.ndarray, count: int) -> list[np.ndarray]:
+    """``arr`` (H, W, 3) uint8 and up to ``count`` halvings, each texel the
+    rounded mean of 2 x 2 (an odd side's last row or column repeated)."""
+    levels = [arr]
+    while len(levels) <= count and max(levels[-1].shape[:2]) > 1:
+        a = levels[-1]
+        if a.shape[0] % 2:
+            a = np.concatenate([a, a[-1:]], axis=0)
+        if a.shape[1] % 2:
+            a = np.concatenate([a, a[:, -1:]], axis=1)
+        rows = a[0::2].astype(np.uint16) + a[1::2]
+        total = rows[:, 0::2] + rows[:, 1::2]
+        levels.append(((total + 2) >> 2).astype(np.uint8))
+    return levels
+
+
 def _sample_texture(image, uv: np.ndarray) -> np.ndarray:
-    """Nearest texel of a PIL image at (F, 2) UVs (wrapped), as (F, 3) in [0, 1]."""
+    """Mean texture colour of each face with corner UVs ``uv`` (F, 3, 2)
+    (wrapped), as (F, 3) in [0, 1] (:data:`TEXTURE_SPLIT_MAX`). The image
+    and its mip levels stay 8-bit (a 16k texture as floats would take 6 GB)."""
     try:
-        arr = np.asarray(image.convert("RGB"), dtype=np.float64) / 255.0
+        arr = np.asarray(image if image.mode == "RGB" else image.convert("RGB"), dtype=np.uint8)
     except Exception as exc:
         raise InputError(f"the mesh's texture image cannot be decoded: {exc}") from None
     h, w = arr.shape[:2]
-    u = np.mod(np.nan_to_num(uv[:, 0]), 1.0)
-    v = np.mod(np.nan_to_num(uv[:, 1]), 1.0)
-    x = np.clip((u * w).astype(np.int64), 0, w - 1)
-    y = np.clip(((1.0 - v) * h).astype(np.int64), 0, h - 1)
-    return arr[y, x]
+    uv = np.nan_to_num(np.asarray(uv, dtype=np.float64))
+    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    texels = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) * w * h
+    # n^2 samples for about texels / 4 (n = 2^ceil(log2(sqrt(texels) / 2))),
+    # each from the level whose texels are about their spacing.
+    level = np.ceil(np.log2(np.maximum(np.sqrt(texels) / 2.0, 1.0)))
+    n_face = np.minimum(2 ** level.astype(np.int64), TEXTURE_SPLIT_MAX)
+    spacing = np.sqrt(texels) / n_face
+    mip = np.floor(np.log2(np.maximum(spacing, 1.0))).astype(np.int64)
+    levels = _mip_levels(arr, int(mip.max()) if len(mip) else 0)
+    mip = np.minimum(mip, len(levels) - 1)
+    out = np.zeros((len(uv), 3))
+    key = n_face * 64 + mip
+    order = np.argsort(key, kind="stable")
+    groups, starts = np.unique(key[order], return_index=True)
+    for g, rows in zip(groups, np.split(order, starts[1:]), strict=True):
+        n, m = int(g) // 64, int(g) % 64
+        tex = levels[m]
+        th, tw = tex.shape[:2]
+        at = np.matmul(_split_centroids(n)[None], uv[rows])  # (F, n^2, 2)
+        x = np.clip((np.mod(at[..., 0], 1.0) * (w / 2**m)).astype(np.int64), 0, tw - 1)
+        y = np.clip(((1.0 - np.mod(at[..., 1], 1.0)) * (h / 2**m)).astype(np.int64), 0, th - 1)
+        out[rows] = tex[y, x].sum(axis=1, dtype=np.uint32) / (255.0 * n * n)
+    return out
 
 
 def closed_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
