@@ -25,6 +25,10 @@ lengths of all its open edges, an edge of three faces or more among them,
 summed and then squared), against ``all`` (each hole's length squared,
 summed; edges of three faces no hole).
 
+``--enclosed`` compares the faces of patches their whole encloses (seen
+from neither side: a storey's roof under the next storey's floor) built,
+``drawn`` (before), against left out, the default.
+
 ``--fins`` compares how faces beside an edge of three faces or more are
 read: ``fins open``, as until the rule of docs/coverage.md "Edges of three
 faces" (:func:`fins_open_sides`: such faces open, the rest of their
@@ -37,7 +41,7 @@ closed, and PSNR (dB) / FLIP against 8x8 polygons in the object's box for
 1-spp and 2x2 polygons, the volume and the high splats of each variant.
 The images are deterministic: no spread to report.
 
-    .venv/bin/python demos/bench_closure.py [tree bush ... | mesh files] [--size 512] [--holes | --fins]
+    .venv/bin/python demos/bench_closure.py [tree bush ... | mesh files] [--size 512] [--holes | --fins | --enclosed]
         [--md docs/coverage.md]
 """
 
@@ -73,8 +77,12 @@ VARIANTS = {"before": None, "corners": 0.0, "all": "default"}
 HOLE_VARIANTS = {"summed": "summed", "all": "default"}
 #: --fins: faces beside edges of three faces open (before) against the default.
 FIN_VARIANTS = {"fins open": "fins", "all": "default"}
+#: --enclosed: the faces of patches their whole encloses drawn (before) against the default (left out).
+ENCLOSED_VARIANTS = {"drawn": "drawn", "left out": "default"}
 FINS_BEGIN = "<!-- bench_closure_fins: begin -->"
 FINS_END = "<!-- bench_closure_fins: end -->"
+ENCLOSED_BEGIN = "<!-- bench_closure_enclosed: begin -->"
+ENCLOSED_END = "<!-- bench_closure_enclosed: end -->"
 HOLES_BEGIN = "<!-- bench_closure_holes: begin -->"
 HOLES_END = "<!-- bench_closure_holes: end -->"
 
@@ -114,7 +122,7 @@ def summed_sides(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     if nf == 0:
         return sides
     v = np.asarray(vertices, dtype=np.float64)
-    _, repeat = mesh_module.face_topology(v, faces)
+    _, repeat, _ = mesh_module.face_topology(v, faces)
     f_all = mesh_module.merged_vertices(v)[faces]
     degenerate = (f_all[:, 0] == f_all[:, 1]) | (f_all[:, 1] == f_all[:, 2]) | (f_all[:, 2] == f_all[:, 0])
     topo = np.flatnonzero(~repeat & ~degenerate)
@@ -157,7 +165,7 @@ def fins_open_sides(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     original = mesh_module.outside_sides
     mesh_module.outside_sides = volume_sign
     try:
-        sides, repeat = mesh_module.face_topology(v, faces)
+        sides, repeat, _ = mesh_module.face_topology(v, faces)
     finally:
         mesh_module.outside_sides = original
     f = mesh_module.merged_vertices(v)[faces]
@@ -173,13 +181,16 @@ def fins_open_sides(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 def set_variant(name: str, default_hole: float, variants: dict):
     hole = variants[name]
-    mesh_module.HOLE_SHARE = default_hole if hole in ("default", "summed", "fins") else (hole or 0.0)
+    mesh_module.HOLE_SHARE = default_hole if hole in ("default", "summed", "fins", "drawn") else (hole or 0.0)
+    none = lambda f: np.zeros(len(f), bool)  # noqa: E731
     if hole is None:
-        mesh_stream.face_topology = lambda v, f: (strict_sides(v, f), np.zeros(len(f), bool))
+        mesh_stream.face_topology = lambda v, f: (strict_sides(v, f), none(f), none(f))
     elif hole == "summed":
-        mesh_stream.face_topology = lambda v, f: (summed_sides(v, f), mesh_module.face_topology(v, f)[1])
+        mesh_stream.face_topology = lambda v, f: (summed_sides(v, f), mesh_module.face_topology(v, f)[1], none(f))
     elif hole == "fins":
-        mesh_stream.face_topology = lambda v, f: (fins_open_sides(v, f), mesh_module.face_topology(v, f)[1])
+        mesh_stream.face_topology = lambda v, f: (fins_open_sides(v, f), mesh_module.face_topology(v, f)[1], none(f))
+    elif hole == "drawn":
+        mesh_stream.face_topology = lambda v, f: (*mesh_module.face_topology(v, f)[:2], none(f))
     else:
         mesh_stream.face_topology = mesh_module.face_topology
 
@@ -195,6 +206,8 @@ def closed_share(mesh, name: str, variants: dict) -> float:
 
 
 def pick_variants(args) -> dict:
+    if args.enclosed:
+        return ENCLOSED_VARIANTS
     return FIN_VARIANTS if args.fins else HOLE_VARIANTS if args.holes else VARIANTS
 
 
@@ -230,13 +243,18 @@ def main() -> None:
     ap = corpus_parser(__doc__.splitlines()[0], scenes.CORPUS)
     ap.add_argument("--holes", action="store_true", help="compare the hole measures (summed, all)")
     ap.add_argument("--fins", action="store_true", help="compare the readings of edges of three faces (fins open, all)")
+    ap.add_argument("--enclosed", action="store_true", help="compare enclosed patches drawn and left out")
     args = ap.parse_args()
     run = run_corpus_demo(args, run_scene)
     variants = pick_variants(args)
     columns = ["1 spp", "2x2", *(f"{m} {v}" for m in ("volume", "splat") for v in variants)]
     table = [[r["scene"], r["camera"], " / ".join(f"{100 * r[f'closed {v}']:.1f}" for v in variants),
               *(pair(r[c]) for c in columns)] for r in run.rows]  # fmt: skip
-    if args.fins:
+    if args.enclosed:
+        legend = ("(drawn / left out: the same). drawn: the faces of patches their whole encloses (seen from neither "
+                  "side: a storey's roof under the next one's floor) built (before); left out: not built.")  # fmt: skip
+        begin, end = ENCLOSED_BEGIN, ENCLOSED_END
+    elif args.fins:
         legend = ("(fins open / all). fins open: a face beside an edge of three faces or more open, each component "
                   "signed by its own signed volume (before); all: such faces kept in their components, a component "
                   "beside such an edge signed by what the outside sees of it (aniso3d.build.outside).")  # fmt: skip

@@ -53,7 +53,8 @@ def build_open(mesh, *args, **kwargs):
     from aniso3d import build_texture
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(mesh_stream, "face_topology", lambda v, f: (np.zeros(len(f), np.int8), np.zeros(len(f), bool)))
+        none = lambda f: np.zeros(len(f), bool)  # noqa: E731
+        mp.setattr(mesh_stream, "face_topology", lambda v, f: (np.zeros(len(f), np.int8), none(f), none(f)))
         return build_texture(mesh, *args, **kwargs)
 
 

@@ -806,3 +806,40 @@ def test_bounds_of_a_texture_are_its_occupied_voxels():
     empty = build_texture(Mesh.from_arrays([[0, 0, 0], [1, 1, 1], [2, 2, 2]], [[0, 1, 2]]), 4, 8)
     with pytest.raises(InputError, match="texture is empty"):
         bounds_of(empty)
+
+
+def test_faces_a_solid_encloses_are_left_out():
+    """A wall across the inside of a closed box, joined to its walls (an
+    edge of three faces where they meet: the box's faces and the wall are
+    patches, and rays find what the outside sees of each): no ray from
+    either side of the inner wall leaves the box, so it is enclosed and the
+    texture leaves it out; the box's faces stay, closed, wound outwards.
+    (A storey's roof under the next storey's floor is such a face: drawn,
+    the texture's renderers showed lines along the joints.)"""
+    from aniso3d.build.mesh import face_topology
+
+    box = scenes.cube()
+    v = np.asarray(box.vertices, np.float64)
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    mid = 0.5 * (lo[1] + hi[1])
+    # The box cut at mid-height: its side walls split so that the inner wall's
+    # edges are theirs (corners shared), the inner wall fanned from one corner.
+    xs, zs = (lo[0], hi[0]), (lo[2], hi[2])
+    ring = [(xs[0], zs[0]), (xs[1], zs[0]), (xs[1], zs[1]), (xs[0], zs[1])]
+    levels = (lo[1], mid, hi[1])
+    verts = np.array([[x, y, z] for y in levels for x, z in ring])
+    faces = []
+    for k in range(2):  # the side walls of the lower and upper halves, outwards
+        for i in range(4):
+            j = (i + 1) % 4
+            a, b, c, d = 4 * k + i, 4 * k + j, 4 * (k + 1) + j, 4 * (k + 1) + i
+            faces += [[a, c, b], [a, d, c]]
+    faces += [[0, 1, 2], [0, 2, 3], [8, 10, 9], [8, 11, 10]]  # bottom (down), top (up)
+    inner = [[4, 5, 6], [4, 6, 7]]
+    mesh = Mesh.from_arrays(verts, np.array(faces + inner))
+    sides, repeat, enclosed = face_topology(mesh.vertices, mesh.faces)
+    assert enclosed.tolist() == [False] * 20 + [True, True]
+    assert not repeat.any() and (sides[:20] != 0).all() and (sides[20:] == 0).all()
+    tex = build_texture(mesh, 8, 16)
+    outer = Mesh.from_arrays(verts, np.array(faces))
+    assert tex.total_area() == pytest.approx(outer.area(), rel=1e-12)

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aniso3d.build.outside import outside_sides
+from aniso3d.build.outside import ENCLOSED, outside_sides
 from aniso3d.build.ply import read_ply_header
 from aniso3d.errors import InputError, InputWarning
 
@@ -611,6 +611,11 @@ def repeated_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return face_topology(vertices, faces)[1]
 
 
+def enclosed_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F,) bool: faces of patches their whole encloses (:func:`face_topology`)."""
+    return face_topology(vertices, faces)[2]
+
+
 def merged_vertices(vertices: np.ndarray) -> np.ndarray:
     """(V,) int64: one id per position, vertices within :data:`MERGE_SHARE`
     of the mesh's extent of each other sharing it (rounded to that grid; a
@@ -635,10 +640,12 @@ def merged_vertices(vertices: np.ndarray) -> np.ndarray:
     return same.reshape(-1).astype(np.int64)
 
 
-def face_topology(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(sides, repeat)``: (F,) int8 +1 for a face of a closed surface wound
-    outwards, -1 for one wound inwards, 0 for a face of an open surface; and
-    (F,) bool for a face that repeats an earlier one.
+def face_topology(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(sides, repeat, enclosed)``: (F,) int8 +1 for a face of a closed
+    surface wound outwards, -1 for one wound inwards, 0 for a face of an open
+    surface; (F,) bool for a face that repeats an earlier one; and (F,) bool
+    for a face of a patch its whole encloses (seen from neither side, see
+    below). A texture leaves out the repeats and the enclosed faces.
 
     Vertices are matched by position (:func:`merged_vertices`: meshes split
     them along seams, and exporters write one corner with float noise). A
@@ -654,13 +661,21 @@ def face_topology(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, 
     only its faces beside an edge walked the same way twice are open; an
     edge of three faces or more is no hole and leaves the faces beside it in
     their components). Its orientation is the sign of its signed volume;
-    components enclosing no volume are open."""
+    components enclosing no volume are open. A closed component that ends at
+    an edge of three faces or more (a patch of a larger whole: a wall, a
+    floor, a storey's roof) is signed by what rays from its sides see of the
+    outside (:func:`~aniso3d.build.outside.outside_sides`); one they see
+    from neither side lies inside its whole (a storey's roof under the next
+    storey's floor, the faces where an assembly's parts touch): enclosed.
+    Drawn, such faces showed as lines along the joints in the texture's
+    renderers (docs/coverage.md, "Touching solids")."""
     faces = np.asarray(faces, dtype=np.int64)
     nf = len(faces)
     sides = np.zeros(nf, dtype=np.int8)
     repeat = np.zeros(nf, dtype=bool)
+    enclosed = np.zeros(nf, dtype=bool)
     if nf == 0:
-        return sides, repeat
+        return sides, repeat, enclosed
     v = np.asarray(vertices, dtype=np.float64)
     f = merged_vertices(v)[faces]
     degenerate = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
@@ -675,14 +690,14 @@ def face_topology(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, 
     repeat &= ~degenerate
     topo = np.flatnonzero(~repeat & ~degenerate)
     if len(topo) == 0:
-        return sides, repeat
-    sides[topo] = _closed_components(v, faces[topo], f[topo])
-    return sides, repeat
+        return sides, repeat, enclosed
+    sides[topo], enclosed[topo] = _closed_components(v, faces[topo], f[topo])
+    return sides, repeat, enclosed
 
 
-def _closed_components(v: np.ndarray, faces: np.ndarray, f: np.ndarray) -> np.ndarray:
-    """:func:`face_topology`'s sides of non-degenerate, unrepeated faces
-    ``faces`` whose merged corners are ``f``."""
+def _closed_components(v: np.ndarray, faces: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`face_topology`'s sides and enclosed faces of non-degenerate,
+    unrepeated faces ``faces`` whose merged corners are ``f``."""
     nf = len(faces)
     a = f.reshape(-1)
     b = f[:, [1, 2, 0]].reshape(-1)
@@ -746,7 +761,10 @@ def _closed_components(v: np.ndarray, faces: np.ndarray, f: np.ndarray) -> np.nd
             part = np.isin(whole, whole[np.isin(root, patches)])
             if np.count_nonzero(part) <= OUTSIDE_FACES:
                 sign[patches] = outside_sides(v, faces[part], f[part], root[part], patches, whole[part])
-    return np.where(local & closed[root], sign[root], 0).astype(np.int8)
+    # A patch no ray from either side leaves its whole by lies inside it.
+    enclosed = sign[root] == ENCLOSED
+    sign[sign == ENCLOSED] = 0
+    return np.where(local & closed[root], sign[root], 0).astype(np.int8), enclosed
 
 
 def volume_signs(v: np.ndarray, faces: np.ndarray, root: np.ndarray, n: int) -> np.ndarray:

@@ -84,10 +84,14 @@ class TriangleSource:
     #: that repeat an earlier one (:func:`~aniso3d.build.mesh.face_topology`),
     #: left out of the build.
     repeat: np.ndarray | None = None
+    #: (n_faces,) bool once :meth:`find_closed` found them, else None: faces
+    #: of patches their whole encloses (:func:`~aniso3d.build.mesh.face_topology`),
+    #: left out of the build.
+    enclosed: np.ndarray | None = None
 
     def find_closed(self, memory_budget: int | None = None) -> bool:
-        """Find which faces lie on a closed surface and which repeat an
-        earlier face (:func:`~aniso3d.build.mesh.face_topology`, vertices
+        """Find which faces lie on a closed surface, which repeat an
+        earlier face and which their whole encloses (:func:`~aniso3d.build.mesh.face_topology`, vertices
         matched by position), reading every triangle once, unless that would
         take more than ``memory_budget`` bytes (about
         :data:`CLOSED_BYTES_PER_FACE` a face): then none is taken as closed
@@ -98,7 +102,8 @@ class TriangleSource:
             return False
         tri = [self.read(a, min(self.n_faces, a + READ_FACES)).triangles for a in range(0, self.n_faces, READ_FACES)]
         tri = np.concatenate(tri) if tri else np.zeros((0, 3, 3))
-        self.closed, self.repeat = face_topology(tri.reshape(-1, 3), np.arange(3 * len(tri)).reshape(-1, 3))
+        faces = np.arange(3 * len(tri)).reshape(-1, 3)
+        self.closed, self.repeat, self.enclosed = face_topology(tri.reshape(-1, 3), faces)
         return True
 
     def bounds(self) -> np.ndarray:
@@ -146,7 +151,7 @@ class MeshSource(TriangleSource):
 
     def find_closed(self, memory_budget: int | None = None) -> bool:
         if self.closed is None:  # the mesh is in memory already
-            self.closed, self.repeat = face_topology(self.mesh.vertices, self.mesh.faces)
+            self.closed, self.repeat, self.enclosed = face_topology(self.mesh.vertices, self.mesh.faces)
         return True
 
 

@@ -18,7 +18,8 @@ make (a building, not the next one in its street). A side whose rays
 escape (meet no face) is seen from outside. A patch whose front escapes
 and whose back does not (at most :data:`ONE_SIDED` of the front's share)
 is a skin wound outwards, +1; the reverse, -1; a patch seen from both
-sides or from neither (a wall inside) is open, 0.
+sides is open, 0; one seen from neither (a wall inside) is
+:data:`ENCLOSED`.
 
 Rays are cast in a frame whose x axis is the ray's direction, through a
 grid of columns over the faces' (y, z) boxes; each edge's crossing test is
@@ -59,6 +60,11 @@ ONE_SIDED = 0.25
 #: The least share of a side's rays that must escape for it to be seen.
 SEEN = 0.05
 
+#: :func:`outside_sides`' answer for a patch seen from neither side (no ray
+#: from it escapes): it lies inside its whole (a storey's roof under the next storey's floor, where
+#: two parts of an assembly touch), and no view of the whole shows it.
+ENCLOSED = 2
+
 #: Query-candidate pairs tested at once (bounds the memory of a cast).
 PAIR_BATCH = 1 << 21
 
@@ -81,7 +87,7 @@ def outside_sides(vertices: np.ndarray, faces: np.ndarray, ids: np.ndarray, patc
                   wanted: np.ndarray, whole: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
     """(P,) int8 the side of each patch in ``wanted`` (labels into
     ``patch``) that the outside sees (see the module): +1 its faces' normals
-    face it, -1 they face away, 0 both or neither. ``faces`` (F, 3) are the
+    face it, -1 they face away, 0 both, :data:`ENCLOSED` neither. ``faces`` (F, 3) are the
     faces rays are cast against (indices into ``vertices``), ``ids`` (F, 3)
     their corners' merged position ids
     (:func:`~aniso3d.build.mesh.merged_vertices`), ``patch`` (F,) each
@@ -148,6 +154,9 @@ def outside_sides(vertices: np.ndarray, faces: np.ndarray, ids: np.ndarray, patc
         front, back = np.where(tried > 0, seen / tried, 0.0)
     out[(front >= SEEN) & (back <= ONE_SIDED * front)] = 1
     out[(back >= SEEN) & (front <= ONE_SIDED * back)] = -1
+    # No ray from either side escapes (not even SEEN's few: a patch seen a
+    # little, through a window, is left drawn).
+    out[(tried[0] > 0) & (seen[0] == 0) & (seen[1] == 0)] = ENCLOSED
     return out
 
 

@@ -683,14 +683,19 @@ def plan_chunks(n_faces: int, chunk_size: int) -> list[tuple[int, int]]:
 def read_chunk(source, start: int, stop: int) -> TriangleChunk:
     """Faces ``start:stop`` of ``source`` with the closed-surface flags the
     source found before the build (``source.closed``), if any, less the
-    faces that repeat an earlier one (``source.repeat``)."""
+    faces that repeat an earlier one (``source.repeat``) and those their
+    whole encloses (``source.enclosed``)."""
     chunk = source.read(start, stop)
     closed = getattr(source, "closed", None)
     if chunk.closed is None and closed is not None:
         chunk = replace(chunk, closed=closed[start:stop])
-    repeat = getattr(source, "repeat", None)
-    if repeat is not None and repeat[start:stop].any():
-        keep = ~repeat[start:stop]
+    out = np.zeros(stop - start, dtype=bool)
+    for name in ("repeat", "enclosed"):
+        left = getattr(source, name, None)
+        if left is not None:
+            out |= left[start:stop]
+    if out.any():
+        keep = ~out
         chunk = TriangleChunk(chunk.triangles[keep], chunk.kd[keep], chunk.ks[keep], chunk.shininess[keep],
                               None if chunk.closed is None else chunk.closed[keep])  # fmt: skip
     return chunk

@@ -773,6 +773,8 @@ def build_texture(
     found = source.find_closed(memory_budget)
     stats["closed_faces"] = int(np.count_nonzero(source.closed)) if found else None
     stats["repeated_faces"] = int(np.count_nonzero(source.repeat)) if found and source.repeat is not None else None
+    enclosed = getattr(source, "enclosed", None)
+    stats["enclosed_faces"] = int(np.count_nonzero(enclosed)) if found and enclosed is not None else None
     timings["closed"] = time.perf_counter() - t0
     seconds: dict = {}
     t0 = time.perf_counter()
