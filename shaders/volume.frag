@@ -549,6 +549,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
     // the voxel with no edge or half-plane of its own; the run's sheets
     // crossed after it add nothing to its colour (render/volume.py:RUN_FRONT_GAP).
     float front_t = BIG;
+    bool spread = false;       // planar: a partial sheet's share lies beside the centre ray (RUN_DEFER)
     if (RUN_FRONT_GAP >= 0.0 && sheets && u_opacity_mode == 3 && foot > 0.0 && e1 - e0 >= 2u) {
         for (uint e = e0; e < e1; ++e) {
             uvec4 sh = ENT(4u * e + 2u);
@@ -769,14 +770,18 @@ void composite(int v, vec3 x_in, float t0, float chord) {
                     ws = fill;
                     if (hp) {
                         vec3 p = x_in + g_d * (nw != 0.0 ? -s_in / nw : 0.0);
-                        ws *= strip ? strip_cover(sh.w, uintBitsToFloat(ENT(4u * e + 3u).x), p, nh, nw,
-                                                  uintBitsToFloat(sh.x), foot * STRIP_FOOT)
-                                    : halfplane_ramp(crease_line ? ENT(4u * e + 3u).x : sh.w, p, nh, nw,
-                                                     uintBitsToFloat(sh.x), foot);
+                        float share_on = strip ? strip_cover(sh.w, uintBitsToFloat(ENT(4u * e + 3u).x), p, nh, nw,
+                                                             uintBitsToFloat(sh.x), foot * STRIP_FOOT)
+                                               : halfplane_ramp(crease_line ? ENT(4u * e + 3u).x : sh.w, p, nh, nw,
+                                                                uintBitsToFloat(sh.x), foot);
+                        ws *= share_on;
                         // ... a line halo whose line crosses its face also
                         // cut by the face, as a sheet's halo past an edge.
                         if (line_halo && ((sh.w >> FACE_CUT_BIT) & 1u) == 1u)
                             ws *= edge_ramp(halo_face, p, nh, nw, foot, -1.0);
+                        // Its share the footprint's beside the centre ray, not
+                        // behind it (RUN_DEFER).
+                        if (ws > 0.0 && (line_halo || share_on < 0.5)) spread = true;
                     }
                     t_cross += ws * th;
                 }
@@ -845,7 +850,7 @@ void composite(int v, vec3 x_in, float t0, float chord) {
     // could only follow within RUN_GAP through an object under a voxel thick.
     vec2 run_hit = run_sides().zw;
     bool settled = steep && run_hit.x >= 1.0 && run_hit.y == 0.0;
-    if (RUN_DEFER != 0 && u_opacity_mode == 3 && g_run && seg > 0.0 && g_trans > 0.0) {
+    if (RUN_DEFER != 0 && u_opacity_mode == 3 && g_run && seg > 0.0 && g_trans > 0.0 && !spread) {
         float here = t0 + (crossed > 0.0 ? t_cross / crossed : 0.5 * chord);
         if (run_hit.x >= 1.0 && run_hit.y == 0.0 && g_run_hit_t <= here) {
             // Behind the run's surface: a layer behind it (RUN_DEFER).

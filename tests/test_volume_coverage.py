@@ -1045,17 +1045,22 @@ def test_the_face_between_two_touching_solids_draws_no_seam(r, monkeypatch, tmp_
     of the joint, the walls and the lid and floor between the boxes (open:
     each pair of faces a patch seen from neither side) are sheets of one run,
     which weighed them alike, and the lid's colour drew a line across the
-    walls. Behind the voxel's first whole sheet (RUN_FRONT_GAP) they add
+    walls. (The build now leaves such enclosed faces out, ``face_topology``;
+    here they are kept, as where the rays that find them are over budget.)
+    Behind the voxel's first whole sheet (RUN_FRONT_GAP) they add
     nothing to the colour: the pixels the polygons cover whole that are more
     than 20 levels off are at most 12 a view and under a quarter of those
     with the rule off (a renderer made with it None; measured 6, 5, 9
     against 62, 51, 108); 20 of the pixels it changes agree with
     march_ray_np within 1/255."""
+    from aniso3d.build import mesh, mesh_stream
     from aniso3d.rendering import volume
     from aniso3d.rendering.renderer import Renderer
 
     boxes = stacked_boxes()
-    tex = aniso3d.build_texture(boxes, 24, 16)
+    with monkeypatch.context() as m:
+        m.setattr(mesh_stream, "face_topology", lambda v, f: (*mesh.face_topology(v, f)[:2], np.zeros(len(f), bool)))
+        tex = aniso3d.build_texture(boxes, 24, 16)
     seams = {"on": [], "off": []}
     changed = []
     for d in [(0.6, 0.35, 1.0), (-0.5, 0.25, 1.0), (1.0, 0.5, 0.3)]:

@@ -910,7 +910,11 @@ class SheetTerms:
       ``counted`` (``hit`` if crossed, else ``band``), ``color`` (3) and ``t``
       (crossing parameter from the voxel's entry, grid units);
     - ``back``: "planar": what the backs of closed surfaces add to the
-      density along the ray, to be taken out (:func:`back_terms`).
+      density along the ray, to be taken out (:func:`back_terms`);
+    - ``spread``: "planar": the voxel counts a half-plane or strip whose
+      covered side the centre ray's crossing misses (its share is the
+      footprint's, beside the ray: a concave corner's wall) or a line halo:
+      not behind an open run (:data:`RUN_DEFER`).
     """
 
     projected: np.ndarray
@@ -920,6 +924,7 @@ class SheetTerms:
     cloud_color: np.ndarray
     run: dict[str, np.ndarray]
     back: np.ndarray
+    spread: np.ndarray | None = None
 
 
 def crossing_fraction(lo: np.ndarray, hi: np.ndarray, half_width: np.ndarray) -> np.ndarray:
@@ -1144,15 +1149,18 @@ def sheet_terms(
         # A half-plane crossed: the share of the footprint on its covered
         # side (per voxel, not in a run: leaves in a voxel are independent).
         e = np.flatnonzero(hit & ~surface & halfp)
+        spread_at = np.zeros(0, np.int64)
         if len(e):
             with np.errstate(divide="ignore", invalid="ignore"):
                 p = x[e] + w[None, :] * np.where(nw[e] != 0.0, -s_in[e] / nw[e], 0.0)[:, None]
             hpl, stp, re = layout.halfplanes, layout.strips, rows[e]
-            ws[e] *= np.where(
+            share_on = np.where(
                 strip[e],
                 strip_cover(stp.angle[re], stp.lo[re], stp.hi[re], sh.offset[at][e], p, nh[e], w, STRIP_FOOT * foot[e]),
                 halfplane_ramp(hpl.angle[re], hpl.offset[re], sh.offset[at][e], p, nh[e], w, foot[e]),
             )
+            ws[e] *= share_on
+            spread_at = owner[e[(share_on < 0.5) & (ws[e] > 0.0)]]
         # A whole sheet the centre ray crosses, with no edge or half-plane of
         # its own: it hides the voxel's run sheets crossed after it (RUN_FRONT_GAP).
         faced = (layout.edges.face[rows] >= 0).any(axis=1) if layout is not None else np.zeros(len(rows), bool)
@@ -1168,9 +1176,13 @@ def sheet_terms(
             run = _with_halos(run, layout, halos, texture, w, lighting, normal, x_in, chords, pixels_v,
                               back_hide if opacity == "planar" else 0.0)  # fmt: skip
     ws_owner, ws_c, ws_t = owner, c, t_hit
+    spread = np.zeros(V, dtype=bool)
+    if opacity == "planar" and edges == "filtered" and layout is not None:
+        spread[spread_at] = True
     if line_halos is not None and layout is not None and opacity == "planar" and edges == "filtered":
         lo_, lws, lc, lt = _line_halo_terms(layout, line_halos, texture, w, lighting, normal, x_in, chords,
                                            pixels_v, back_hide)  # fmt: skip
+        spread[lo_[lws > 0.0]] = True
         ws_owner, ws, ws_c, ws_t = (np.concatenate(x) for x in ((owner, lo_), (ws, lws), (c, lc), (t_hit, lt)))
     crossed = np.bincount(ws_owner, ws, minlength=V)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -1189,7 +1201,7 @@ def sheet_terms(
         run.update(normal=np.zeros((0, 3)), color=np.zeros((0, 3)), edge=np.zeros(0, bool), halo=np.zeros(0, bool),
                    front=np.zeros(0, bool))
         run["voxel"] = run["voxel"].astype(np.int64)
-    return SheetTerms(projected, crossed, t_cross, sheet_color, cloud_color, run, back)
+    return SheetTerms(projected, crossed, t_cross, sheet_color, cloud_color, run, back, spread)
 
 
 def _crossings(s_in, nw, chords, slack, a_s, pixels, edges):
@@ -1720,7 +1732,7 @@ def trace_ray_np(
         # A run crossed whole on its entering side, steeply, is settled (volume.frag).
         hit_sides = run_sides(run)[1] if steep and run is not None else None
         settled = hit_sides is not None and hit_sides[0] >= 1.0 and hit_sides[1] == 0.0
-        if RUN_DEFER and opacity == "planar" and run is not None and seg > 0.0 and T > 0.0:
+        if RUN_DEFER and opacity == "planar" and run is not None and seg > 0.0 and T > 0.0 and not st.spread[k]:
             sides = run_sides(run)[1]
             here = ti + (st.t_cross[k] if st.crossed[k] > 0.0 else 0.5 * chord)
             if sides[0] >= 1.0 and sides[1] == 0.0 and run["hit_t"] <= here:
