@@ -163,3 +163,22 @@ def test_lod_frame_stats_count_the_selected_points(rf, distance):
     frame = rf.render_frame(tex, cam, "volume", lod=True, pixel_error=2.0)
     (level,) = frame.stats.levels
     assert frame.stats.drawn == pyr[level].n_voxels and frame.stats.lod["level"] == level
+
+
+@pytest.mark.parametrize("s", [2, 3, 8, 260])
+def test_supersampling_filter_in_integers_is_the_mean_rounded(s):
+    """The box filter sums a uint8 frame in integers (uint16 rows, uint32
+    past 257 samples a side); each pixel is its samples' mean rounded half
+    to even, as the float mean of the samples gives it."""
+    rng = np.random.default_rng(s)
+    h, w = (3, 2) if s > 8 else (17, 11)
+    img = rng.integers(0, 256, (h * s, w * s, 4), dtype=np.uint8)
+    img[:s, :s] = 255  # the largest sums
+    img[s : 2 * s, :s] = np.arange(s * s).reshape(s, s, 1) % 2 * 255  # a mean of x.5: to even
+    want = np.round(img.astype(np.float64).reshape(h, s, w, s, 4).mean(axis=(1, 3))).astype(np.uint8)
+    from aniso3d.rendering.renderer import downsample
+
+    got = downsample(img, s)
+    assert got.dtype == np.uint8
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(downsample(img[::-1], s), want[::-1])

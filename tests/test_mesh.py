@@ -471,6 +471,7 @@ def test_a_mesh_folder_of_symlinks_keeps_its_materials(tmp_path):
     np.testing.assert_allclose(m.kd, [RED_KD] * 2, atol=BYTE)
 
 
+@pytest.mark.gpu
 def test_a_missing_texture_is_one_warning_that_names_it(tmp_path, capsys):
     from aniso3d import InputWarning
     from aniso3d.app.cli import main
@@ -504,3 +505,14 @@ def test_a_face_takes_its_textures_mean_not_one_texel(tmp_path):
     m = load_mesh(textured_quad(tmp_path, "lines.png"))
     want = np.array([240, 200, 40]) / 255.0 / 8.0
     np.testing.assert_allclose(m.kd, [want] * 2, atol=0.02)
+
+
+def test_uvs_far_out_wrap_without_error(tmp_path):
+    """UVs of 1e200 (and their areas past float range) wrap round the
+    texture like any other: the faces take a colour of it, no error."""
+    red_texture(tmp_path / "red.png")
+    painted_mtl(tmp_path / "quad.mtl", "red.png")
+    obj = textured_quad(tmp_path, "red.png")
+    obj.write_text(obj.read_text().replace("vt 1 0\n", "vt 1e200 0\n").replace("vt 0 1\n", "vt 0 1e200\n"))
+    m = load_mesh(obj)
+    np.testing.assert_allclose(m.kd, [RED_KD] * 2, atol=BYTE)

@@ -17,7 +17,7 @@ from aniso3d import InputError, ResourceError
 from aniso3d.rendering.camera import Camera
 from aniso3d.rendering.context import GLContext
 from aniso3d.rendering.lighting import Lighting, shade_np
-from aniso3d.rendering.renderer import Renderer, downsample
+from aniso3d.rendering.renderer import Renderer
 
 pytestmark = pytest.mark.gpu
 
@@ -201,20 +201,3 @@ def test_no_growth_over_many_renderers_and_frames():
     gc.collect()
     after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     assert after - before < 30_000, f"peak RSS grew by {after - before} KiB over 15 renderers"
-
-
-@pytest.mark.parametrize("s", [2, 3, 8, 260])
-def test_supersampling_filter_in_integers_is_the_mean_rounded(s):
-    """The box filter sums a uint8 frame in integers (uint16 rows, uint32
-    past 257 samples a side); each pixel is its samples' mean rounded half
-    to even, as the float mean of the samples gives it."""
-    rng = np.random.default_rng(s)
-    h, w = (3, 2) if s > 8 else (17, 11)
-    img = rng.integers(0, 256, (h * s, w * s, 4), dtype=np.uint8)
-    img[:s, :s] = 255  # the largest sums
-    img[s : 2 * s, :s] = np.arange(s * s).reshape(s, s, 1) % 2 * 255  # a mean of x.5: to even
-    want = np.round(img.astype(np.float64).reshape(h, s, w, s, 4).mean(axis=(1, 3))).astype(np.uint8)
-    got = downsample(img, s)
-    assert got.dtype == np.uint8
-    np.testing.assert_array_equal(got, want)
-    np.testing.assert_array_equal(downsample(img[::-1], s), want[::-1])

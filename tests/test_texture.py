@@ -843,3 +843,41 @@ def test_faces_a_solid_encloses_are_left_out():
     tex = build_texture(mesh, 8, 16)
     outer = Mesh.from_arrays(verts, np.array(faces))
     assert tex.total_area() == pytest.approx(outer.area(), rel=1e-12)
+
+
+@pytest.mark.parametrize("window", [0.02, 0.2])
+def test_a_floor_seen_through_a_window_stays(window):
+    """The box and its inner floor again, with a square window cut in one
+    wall of the upper storey (the wall a frame of four quads round it): the
+    floor is seen through it, however few of the rays from its sample points
+    pass through the window, so it is not enclosed (only a watertight whole
+    encloses; rays from 32 points in 8 directions all missed a window of
+    0.2 and dropped the floor)."""
+    from aniso3d.build.mesh import face_topology
+
+    ring = [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)]
+    verts = [[x, y, z] for y in (0.0, 0.5, 1.0) for x, z in ring]
+    faces = []
+    for k in range(2):
+        for i in range(4):
+            j = (i + 1) % 4
+            a, b, c, d = 4 * k + i, 4 * k + j, 4 * (k + 1) + j, 4 * (k + 1) + i
+            if (k, i) == (1, 1):
+                frame = (a, b, c, d)  # the upper wall at x = 1: cut below
+                continue
+            faces += [[a, c, b], [a, d, c]]
+    faces += [[0, 1, 2], [0, 2, 3], [8, 10, 9], [8, 11, 10]]
+    h = window / 2
+    hole = [[1.0, 0.75 - h, 0.5 - h], [1.0, 0.75 - h, 0.5 + h], [1.0, 0.75 + h, 0.5 + h], [1.0, 0.75 + h, 0.5 - h]]
+    n0 = len(verts)
+    verts += hole
+    a = frame[0]
+    out = np.cross(np.subtract(verts[frame[2]], verts[a]), np.subtract(verts[frame[1]], verts[a]))
+    for i in range(4):
+        j = (i + 1) % 4
+        for t in ([frame[i], frame[j], n0 + j], [frame[i], n0 + j, n0 + i]):
+            n = np.cross(np.subtract(verts[t[1]], verts[t[0]]), np.subtract(verts[t[2]], verts[t[0]]))
+            faces.append(t if n @ out > 0 else [t[0], t[2], t[1]])
+    faces += [[4, 5, 6], [4, 6, 7]]  # the floor between the storeys
+    _, _, enclosed = face_topology(np.array(verts, float), np.array(faces))
+    assert not enclosed.any()

@@ -1091,7 +1091,8 @@ def storeys(count: int = 3, height: float = 0.15) -> Mesh:
     outline = np.array([(0, 0), (-0.7, -0.7), (-0.3, -1.3), (0.15, -1.9), (1.0, -1.3), (0.5, -0.7)], np.float64)
     n = len(outline)
     sides = [[i, (i + 1) % n, n + (i + 1) % n] for i in range(n)] + [[i, n + (i + 1) % n, n + i] for i in range(n)]
-    caps = [[n, n + i, n + i + 1] for i in range(1, n - 1)] + [[0, i + 1, i] for i in range(1, n - 1)]
+    # Fanned from corner 5, which sees every other (corner 5 is reflex).
+    caps = [[n + 5, n + i, n + i + 1] for i in range(n - 2)] + [[5, i + 1, i] for i in range(n - 2)]
     verts, faces = [], []
     for k in range(count):
         ring = [np.c_[outline, np.full(n, z)] for z in (k * height, (k + 1) * height)]
@@ -1109,14 +1110,19 @@ def test_what_lies_behind_a_crossed_wall_is_drawn_behind_it(r, monkeypatch, tmp_
     at its voxel, in front of the walls' run, it drew a line along every
     storey. Behind the run's crossed surface (RUN_DEFER) it goes behind the
     run: the pixels the polygons cover whole that are more than 20 levels
-    off drop to under 0.75 of those with the rule off in every view and
-    none in the first (measured 0, 44, 188 against 57, 131, 250); 20 of the
-    pixels it changes agree with march_ray_np within 1/255."""
+    off drop to under half of those with the rule off in every view and
+    none in the first (measured 0, 45, 51 against 58, 133, 164); 20 of the
+    pixels it changes agree with march_ray_np within 1/255. (The build
+    leaves such enclosed roofs out, ``face_topology``; they are kept here,
+    as where the outside test is over budget.)"""
+    from aniso3d.build import mesh, mesh_stream
     from aniso3d.rendering import volume
     from aniso3d.rendering.renderer import Renderer
 
     building = storeys()
-    tex = aniso3d.build_texture(building, 32, 16)
+    with monkeypatch.context() as m:  # its inner roofs kept (the build leaves enclosed faces out)
+        m.setattr(mesh_stream, "face_topology", lambda v, f: (*mesh.face_topology(v, f)[:2], np.zeros(len(f), bool)))
+        tex = aniso3d.build_texture(building, 32, 16)
     changed = []
     for k, d in enumerate([(0.6, 0.45, 1.0), (-0.5, 0.35, 1.0), (1.0, 0.5, -0.3)]):
         cam = Camera.frame(building.bounds, d, fov=30.0)
@@ -1129,7 +1135,7 @@ def test_what_lies_behind_a_crossed_wall_is_drawn_behind_it(r, monkeypatch, tmp_
             with Renderer(SIZE) as before:
                 off, _ = render_float(before, tex, cam)
         seams = [int((np.abs(img[..., :3] - ref[..., :3]).max(axis=-1)[whole] > 20 / 255).sum()) for img in (on, off)]
-        assert seams[0] < 0.75 * seams[1] and (k > 0 or seams[0] == 0), f"{d}: {seams} " + dump(
+        assert seams[0] < 0.5 * seams[1] and (k > 0 or seams[0] == 0), f"{d}: {seams} " + dump(
             tmp_path, "storeys", ref, on
         )
         diff = np.argwhere(np.abs(on - off).max(axis=-1) > 2 / 255)

@@ -529,6 +529,8 @@ def _material_image(mat):
 #: trimesh's capsule, thin grid lines on black, came out as faces at random
 #: full colour or black.
 TEXTURE_SPLIT_MAX = 8
+#: Faces sampled at once (bounds the samples' memory: about 40 MB at n = 8).
+TEXTURE_FACES = 1 << 15
 
 
 def _split_centroids(n: int) -> np.ndarray:
@@ -567,18 +569,24 @@ def _sample_texture(image, uv: np.ndarray) -> np.ndarray:
     except Exception as exc:
         raise InputError(f"the mesh's texture image cannot be decoded: {exc}") from None
     h, w = arr.shape[:2]
-    uv = np.nan_to_num(np.asarray(uv, dtype=np.float64))
+    uv = np.nan_to_num(np.asarray(uv, dtype=np.float64), posinf=0.0, neginf=0.0)
+    out = np.zeros((len(uv), 3))
+    if len(uv) == 0:
+        return out
     e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
-    texels = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) * w * h
+    with np.errstate(over="ignore", invalid="ignore"):
+        texels = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) * w * h
+    # A face over the whole texture at most (UVs far out wrap around it).
+    texels = np.where(np.isfinite(texels), np.minimum(texels, float(w) * h), float(w) * h)
     # n^2 samples for about texels / 4 (n = 2^ceil(log2(sqrt(texels) / 2))),
     # each from the level whose texels are about their spacing.
-    level = np.ceil(np.log2(np.maximum(np.sqrt(texels) / 2.0, 1.0)))
-    n_face = np.minimum(2 ** level.astype(np.int64), TEXTURE_SPLIT_MAX)
+    most = int(np.log2(TEXTURE_SPLIT_MAX))
+    level = np.clip(np.ceil(np.log2(np.maximum(np.sqrt(texels) / 2.0, 1.0))), 0, most).astype(np.int64)
+    n_face = 2**level
     spacing = np.sqrt(texels) / n_face
     mip = np.floor(np.log2(np.maximum(spacing, 1.0))).astype(np.int64)
-    levels = _mip_levels(arr, int(mip.max()) if len(mip) else 0)
+    levels = _mip_levels(arr, int(mip.max()))
     mip = np.minimum(mip, len(levels) - 1)
-    out = np.zeros((len(uv), 3))
     key = n_face * 64 + mip
     order = np.argsort(key, kind="stable")
     groups, starts = np.unique(key[order], return_index=True)
@@ -586,10 +594,13 @@ def _sample_texture(image, uv: np.ndarray) -> np.ndarray:
         n, m = int(g) // 64, int(g) % 64
         tex = levels[m]
         th, tw = tex.shape[:2]
-        at = np.matmul(_split_centroids(n)[None], uv[rows])  # (F, n^2, 2)
-        x = np.clip((np.mod(at[..., 0], 1.0) * (w / 2**m)).astype(np.int64), 0, tw - 1)
-        y = np.clip(((1.0 - np.mod(at[..., 1], 1.0)) * (h / 2**m)).astype(np.int64), 0, th - 1)
-        out[rows] = tex[y, x].sum(axis=1, dtype=np.uint32) / (255.0 * n * n)
+        split = _split_centroids(n)[None]
+        for a in range(0, len(rows), TEXTURE_FACES):  # bounded memory: (faces, n^2, 2) a chunk
+            r = rows[a : a + TEXTURE_FACES]
+            at = np.matmul(split, uv[r])  # (F, n^2, 2)
+            x = np.clip((np.mod(at[..., 0], 1.0) * (w / 2**m)).astype(np.int64), 0, tw - 1)
+            y = np.clip(((1.0 - np.mod(at[..., 1], 1.0)) * (h / 2**m)).astype(np.int64), 0, th - 1)
+            out[r] = tex[y, x].sum(axis=1, dtype=np.uint32) / (255.0 * n * n)
     return out
 
 
@@ -761,7 +772,14 @@ def _closed_components(v: np.ndarray, faces: np.ndarray, f: np.ndarray) -> tuple
             part = np.isin(whole, whole[np.isin(root, patches)])
             if np.count_nonzero(part) <= OUTSIDE_FACES:
                 sign[patches] = outside_sides(v, faces[part], f[part], root[part], patches, whole[part])
-    # A patch no ray from either side leaves its whole by lies inside it.
+                # Enclosed only in a watertight whole: where the whole has a
+                # border (a window in a wall), rays from a few sample points
+                # may all miss it, and the faces seen through it would go.
+                border = (count == 1)[inverse].reshape(-1, 3).any(axis=1)
+                leaky = np.zeros(nf, dtype=bool)
+                leaky[whole[border]] = True
+                sign[patches[(sign[patches] == ENCLOSED) & leaky[whole[patches]]]] = 0
+    # A patch no ray from either side leaves its watertight whole by lies inside it.
     enclosed = sign[root] == ENCLOSED
     sign[sign == ENCLOSED] = 0
     return np.where(local & closed[root], sign[root], 0).astype(np.int8), enclosed
