@@ -1025,6 +1025,45 @@ def test_backs_partly_on_a_closed_surface_agree_with_the_twin(r):
         assert_twin_agrees(r, [(tex, cam, img, y, x) for y, x in partial[rng.choice(len(partial), 40, replace=False)]])
 
 
+def texture_with_enclosed_faces(monkeypatch, mesh_: Mesh, resolution: int):
+    """``mesh_``'s texture with the faces its wholes enclose kept (the build
+    leaves them out, ``face_topology``; kept where the outside test is over
+    budget): the joints' inner faces the rules below are about."""
+    from aniso3d.build import mesh, mesh_stream
+
+    with monkeypatch.context() as m:
+        m.setattr(mesh_stream, "face_topology", lambda v, f: (*mesh.face_topology(v, f)[:2], np.zeros(len(f), bool)))
+        return aniso3d.build_texture(mesh_, resolution, 16)
+
+
+def seams_without(r, monkeypatch, mesh_: Mesh, tex, rule: str, off, views):
+    """Per view of ``views`` (directions), the pixels the 8 x 8 polygons
+    cover whole that the volume draws more than 20 levels off, with the
+    volume.py constant ``rule`` as it is and set to ``off`` (a renderer made
+    while it is), the images, and the pixels the rule changes as
+    :func:`assert_twin_agrees` picks."""
+    from aniso3d.rendering import volume
+    from aniso3d.rendering.renderer import Renderer
+
+    out, changed = [], []
+    for d in views:
+        cam = Camera.frame(mesh_.bounds, d, fov=30.0)
+        ref = truth(r, mesh_, cam, ssaa=8)
+        whole = ref[..., 3] >= 1.0
+        with Renderer(SIZE) as now:
+            on, _ = render_float(now, tex, cam)
+        with monkeypatch.context() as m:
+            m.setattr(volume, rule, off)
+            with Renderer(SIZE) as before:
+                img_off, _ = render_float(before, tex, cam)
+        off_by = [np.abs(img[..., :3] - ref[..., :3]).max(axis=-1)[whole] for img in (on, img_off)]
+        counts = [int((e > 20 / 255).sum()) for e in off_by]
+        out.append((d, counts, ref, on))
+        diff = np.argwhere(np.abs(on - img_off).max(axis=-1) > 2 / 255)
+        changed += [(tex, cam, on, y, x) for y, x in diff]
+    return out, changed
+
+
 def stacked_boxes(cut: float = 0.5125) -> Mesh:
     """Two closed boxes, each drawn whole, the upper standing on the lower:
     the lower's lid and the upper's floor lie in one plane, facing apart,
@@ -1053,32 +1092,13 @@ def test_the_face_between_two_touching_solids_draws_no_seam(r, monkeypatch, tmp_
     with the rule off (a renderer made with it None; measured 6, 5, 9
     against 62, 51, 108); 20 of the pixels it changes agree with
     march_ray_np within 1/255."""
-    from aniso3d.build import mesh, mesh_stream
-    from aniso3d.rendering import volume
-    from aniso3d.rendering.renderer import Renderer
-
     boxes = stacked_boxes()
-    with monkeypatch.context() as m:
-        m.setattr(mesh_stream, "face_topology", lambda v, f: (*mesh.face_topology(v, f)[:2], np.zeros(len(f), bool)))
-        tex = aniso3d.build_texture(boxes, 24, 16)
-    seams = {"on": [], "off": []}
-    changed = []
-    for d in [(0.6, 0.35, 1.0), (-0.5, 0.25, 1.0), (1.0, 0.5, 0.3)]:
-        cam = Camera.frame(boxes.bounds, d, fov=30.0)
-        ref = truth(r, boxes, cam, ssaa=8)
-        whole = ref[..., 3] >= 1.0
-        with Renderer(SIZE) as now:
-            on, _ = render_float(now, tex, cam)
-        with monkeypatch.context() as m:
-            m.setattr(volume, "RUN_FRONT_GAP", None)
-            with Renderer(SIZE) as before:
-                off, _ = render_float(before, tex, cam)
-        for key, img in (("on", on), ("off", off)):
-            seams[key].append(int((np.abs(img[..., :3] - ref[..., :3]).max(axis=-1)[whole] > 20 / 255).sum()))
-        assert seams["on"][-1] <= 12, f"{d}: {seams} " + dump(tmp_path, "stacked", ref, on)
-        diff = np.argwhere(np.abs(on - off).max(axis=-1) > 2 / 255)
-        changed += [(tex, cam, on, y, x) for y, x in diff]
-    assert 4 * sum(seams["on"]) < sum(seams["off"]), seams
+    tex = texture_with_enclosed_faces(monkeypatch, boxes, 24)
+    views = [(0.6, 0.35, 1.0), (-0.5, 0.25, 1.0), (1.0, 0.5, 0.3)]
+    seams, changed = seams_without(r, monkeypatch, boxes, tex, "RUN_FRONT_GAP", None, views)
+    for d, (on, _), ref, img in seams:
+        assert on <= 12, f"{d}: {[c for _, c, _, _ in seams]} " + dump(tmp_path, "stacked", ref, img)
+    assert 4 * sum(c[0] for _, c, _, _ in seams) < sum(c[1] for _, c, _, _ in seams), [c for _, c, _, _ in seams]
     assert len(changed) > 40
     rng = np.random.default_rng(9)
     assert_twin_agrees(r, [changed[i] for i in rng.choice(len(changed), 20, replace=False)])
@@ -1115,31 +1135,12 @@ def test_what_lies_behind_a_crossed_wall_is_drawn_behind_it(r, monkeypatch, tmp_
     pixels it changes agree with march_ray_np within 1/255. (The build
     leaves such enclosed roofs out, ``face_topology``; they are kept here,
     as where the outside test is over budget.)"""
-    from aniso3d.build import mesh, mesh_stream
-    from aniso3d.rendering import volume
-    from aniso3d.rendering.renderer import Renderer
-
     building = storeys()
-    with monkeypatch.context() as m:  # its inner roofs kept (the build leaves enclosed faces out)
-        m.setattr(mesh_stream, "face_topology", lambda v, f: (*mesh.face_topology(v, f)[:2], np.zeros(len(f), bool)))
-        tex = aniso3d.build_texture(building, 32, 16)
-    changed = []
-    for k, d in enumerate([(0.6, 0.45, 1.0), (-0.5, 0.35, 1.0), (1.0, 0.5, -0.3)]):
-        cam = Camera.frame(building.bounds, d, fov=30.0)
-        ref = truth(r, building, cam, ssaa=8)
-        whole = ref[..., 3] >= 1.0
-        with Renderer(SIZE) as now:
-            on, _ = render_float(now, tex, cam)
-        with monkeypatch.context() as m:
-            m.setattr(volume, "RUN_DEFER", False)
-            with Renderer(SIZE) as before:
-                off, _ = render_float(before, tex, cam)
-        seams = [int((np.abs(img[..., :3] - ref[..., :3]).max(axis=-1)[whole] > 20 / 255).sum()) for img in (on, off)]
-        assert seams[0] < 0.5 * seams[1] and (k > 0 or seams[0] == 0), f"{d}: {seams} " + dump(
-            tmp_path, "storeys", ref, on
-        )
-        diff = np.argwhere(np.abs(on - off).max(axis=-1) > 2 / 255)
-        changed += [(tex, cam, on, y, x) for y, x in diff]
+    tex = texture_with_enclosed_faces(monkeypatch, building, 32)
+    views = [(0.6, 0.45, 1.0), (-0.5, 0.35, 1.0), (1.0, 0.5, -0.3)]
+    seams, changed = seams_without(r, monkeypatch, building, tex, "RUN_DEFER", False, views)
+    for k, (d, (on, off), ref, img) in enumerate(seams):
+        assert on < 0.5 * off and (k > 0 or on == 0), f"{d}: {(on, off)} " + dump(tmp_path, "storeys", ref, img)
     assert len(changed) > 40
     rng = np.random.default_rng(10)
     assert_twin_agrees(r, [changed[i] for i in rng.choice(len(changed), 20, replace=False)])
