@@ -622,11 +622,6 @@ def repeated_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return face_topology(vertices, faces)[1]
 
 
-def enclosed_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(F,) bool: faces of patches their whole encloses (:func:`face_topology`)."""
-    return face_topology(vertices, faces)[2]
-
-
 def merged_vertices(vertices: np.ndarray) -> np.ndarray:
     """(V,) int64: one id per position, vertices within :data:`MERGE_SHARE`
     of the mesh's extent of each other sharing it (rounded to that grid; a

@@ -689,13 +689,13 @@ def read_chunk(source, start: int, stop: int) -> TriangleChunk:
     closed = getattr(source, "closed", None)
     if chunk.closed is None and closed is not None:
         chunk = replace(chunk, closed=closed[start:stop])
-    out = np.zeros(stop - start, dtype=bool)
+    left_out = np.zeros(stop - start, dtype=bool)
     for name in ("repeat", "enclosed"):
-        left = getattr(source, name, None)
-        if left is not None:
-            out |= left[start:stop]
-    if out.any():
-        keep = ~out
+        faces = getattr(source, name, None)
+        if faces is not None:
+            left_out |= faces[start:stop]
+    if left_out.any():
+        keep = ~left_out
         chunk = TriangleChunk(chunk.triangles[keep], chunk.kd[keep], chunk.ks[keep], chunk.shininess[keep],
                               None if chunk.closed is None else chunk.closed[keep])  # fmt: skip
     return chunk

@@ -1730,12 +1730,13 @@ def trace_ray_np(
             if a_s + a_f > 0.0:
                 col = (a_s * st.sheet_color[k] + a_f * st.cloud_color[k]) / (a_s + a_f)
         # A run crossed whole on its entering side, steeply, is settled (volume.frag).
-        hit_sides = run_sides(run)[1] if steep and run is not None else None
-        settled = hit_sides is not None and hit_sides[0] >= 1.0 and hit_sides[1] == 0.0
-        if RUN_DEFER and opacity == "planar" and run is not None and seg > 0.0 and T > 0.0 and not st.spread[k]:
-            sides = run_sides(run)[1]
+        # The run's centre ray crossed whole sheets on its entering side only.
+        hit_sides = run_sides(run)[1] if run is not None else None
+        crossed_whole = hit_sides is not None and hit_sides[0] >= 1.0 and hit_sides[1] == 0.0
+        settled = steep and crossed_whole
+        if RUN_DEFER and opacity == "planar" and crossed_whole and seg > 0.0 and T > 0.0 and not st.spread[k]:
             here = ti + (st.t_cross[k] if st.crossed[k] > 0.0 else 0.5 * chord)
-            if sides[0] >= 1.0 and sides[1] == 0.0 and run["hit_t"] <= here:
+            if run["hit_t"] <= here:
                 # Behind the run's surface: a layer behind it (RUN_DEFER).
                 a = seg / T
                 if behind["trans"] == 1.0:
