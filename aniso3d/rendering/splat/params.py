@@ -79,9 +79,10 @@ AA_CLOSE_SIDED = 0.8
 #: taken for the pixel's whole surface, among neighbours that are whole,
 #: and painted it its own dark colour (a 1M-triangle bunny's tail). On the
 #: corpus and eleven meshes of other tools at both bench cameras, 0.1
-#: changes at most 20 pixels a view and no PSNR by more than -0.053 dB (the
-#: building close up), the chair +0.37 and the monkey +0.31 minified; 0.25
-#: reopened the blob's pinholes close up (-0.11 dB).
+#: changes at most 20 pixels a view and no PSNR by more than -0.17 dB (the
+#: building close up, 9 pixels), the chair +0.37 and the monkey +0.31
+#: minified; 0.25 reopened the blob's pinholes close up (-0.11 dB)
+#: (demos/sweep_close_own.py, docs/splat_aa.md).
 AA_CLOSE_OWN = 0.1
 #: A fragment's depth in quality "high" is where its pixel's ray meets the
 #: splat's plane, kept within the splat's bounding sphere grown by this many
