@@ -44,6 +44,23 @@ def quad(x0, x1, y0, y1, z) -> Mesh:
     return Mesh.from_arrays(v, np.array([[0, 1, 2], [0, 2, 3]]), GREY, 0.0, 8.0, name="quad")
 
 
+def step(x_wall: float, z_plate: float) -> Mesh:
+    """A closed L-shaped prism along y (0.25 to 0.75): a plate from x = 0.25
+    to 0.75 with its top at ``z_plate``, and on its left a block up to z =
+    0.75 whose right wall stands at ``x_wall`` (a concave corner where the
+    wall meets the plate's top)."""
+    x0, x1, z0, zt = 0.25, 0.75, 0.25, 0.75
+    ring = [(x0, z0), (x1, z0), (x1, z_plate), (x_wall, z_plate), (x_wall, zt), (x0, zt)]
+    v = np.array([(x, y, z) for y in (0.25, 0.75) for x, z in ring], float)
+    n = len(ring)
+    fan = [(0, i, i + 1) for i in range(1, n - 1)]  # the cap at y = 0.25, facing -y
+    faces = fan + [(n + a, n + c, n + b) for a, b, c in fan]
+    for i in range(n):
+        j = (i + 1) % n
+        faces += [(i, n + j, j), (i, n + i, n + j)]
+    return Mesh.from_arrays(v, np.array(faces), GREY, 0.0, 8.0, name="step")
+
+
 def points_of(mesh: Mesh) -> tuple:
     tex = build_texture(mesh, RES, 16, bounds=BOUNDS)
     return tex, texture_points(tex)
@@ -157,6 +174,26 @@ def test_the_surface_meeting_a_splat_hides_it_only_from_where_it_is_in_front():
     assert not hidden((0.0, 1.0, 5.0))
 
 
+def test_a_crease_partners_angle_is_its_planes_not_its_centroids():
+    """A wall standing 0.2 voxel inside the voxel face where the plate's
+    sheet ends, the plate's top 0.2 voxel above the voxel's floor (as in
+    a CAD part that showed the crack): the plate's crease partner (the
+    wall, in the same voxel) rises at 90 degrees from it, though the
+    wall's centroid, 0.4 voxel up and 0.2 across, lies at 63 degrees from
+    the edge (the angle taken before hid the plate's splats from eyes
+    between the two)."""
+    tex, pts = points_of(step(0.5 + 0.2 * H, 0.5 + 0.2 * H))
+    clips = entry_clips(tex)
+    normal = np.asarray(tex.entry_normal, float)
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    cell = np.asarray(tex.coords)[tex.entry_voxel]
+    plate = (normal[:, 2] > 0.99) & (cell[:, 0] == 16)  # the plate's voxels holding the wall's foot
+    at_wall = plate[:, None] & (clips[:, :, 0] == -1.0)  # cut at x >= 0.5, the face left of the foot
+    assert at_wall.sum() >= 10, at_wall.sum()
+    phi = clips[..., 4][at_wall]
+    assert np.all(np.abs(phi - math.pi / 2) < 0.03), np.degrees(phi)
+
+
 def test_a_cut_subpixel_splat_keeps_its_area_inside_a_surface():
     """Sub-pixel splats facing the camera, each cut by a plane through, near
     or far from its centre: the twin's coverages still sum to each one's
@@ -211,6 +248,25 @@ def test_no_coverage_past_a_walls_end(r, distance, side):
     before, _ = draw_alpha(r, plain, cam)
     if distance < 1:  # resolved: discs reach a pixel and more past the ends
         assert before[past].max() > 0.1, before[past].max()
+
+
+def test_no_crack_where_a_wall_meets_a_plate_inside_a_voxel(r):
+    """The step above seen from the plate's side, 75 degrees up from it:
+    between the wall's centroid's angle (63 degrees) and its plane's (90),
+    where the plate's splats by the wall were dropped as hidden behind it
+    (a line of background along a CAD part's inner corner). Every pixel
+    whose centre sees the plate or the wall near the corner is covered."""
+    x_wall, z_plate = 0.5 + 0.2 * H, 0.5 + 0.2 * H
+    tex, pts = points_of(step(x_wall, z_plate))
+    target = np.array([x_wall + 2 * H, 0.5, z_plate])
+    up = math.radians(75.0)
+    cam = Camera(target + 0.9 * np.array([math.cos(up), 0.25, math.sin(up)]), target, fov=40.0)
+    alpha, view = draw_alpha(r, pts, cam)
+    hit = hit_points(view, z_plate)
+    px = px_size(view, z_plate)
+    plate = (hit[..., 0] > x_wall + 2 * px) & (hit[..., 0] < x_wall + 6 * H) & (np.abs(hit[..., 1] - 0.5) < 0.15)
+    assert plate.sum() > 100, plate.sum()
+    assert alpha[plate].min() > 0.99, alpha[plate].min()
 
 
 @pytest.mark.parametrize("pixel_error", [8.0, 16.0, 32.0])

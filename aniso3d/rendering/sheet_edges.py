@@ -59,6 +59,10 @@ EDGE_MIN_LENGTH = 0.05
 EDGE_SLANT = 0.5
 #: Edges kept per sheet (two: a box's corner).
 MAX_EDGES = 2
+#: A crease partner's angle about the edge is its plane's where the plane
+#: cuts the plane normal to the edge at least this steeply (the sine of the
+#: angle between its normal and the edge), else its centroid's direction.
+PHI_PLANE_MIN = 0.5
 #: Edge kinds.
 OPEN, CREASE = 0, 1
 #: "No face" in the packed edge words (faces are 0-5: 2 * axis + side).
@@ -286,6 +290,20 @@ def sheet_edges(texture, sheets, surface: np.ndarray) -> SheetEdges:
         t = np.cross(n1, u1)
         v = centroid[other] + delta - pm[q]
         v -= np.einsum("ek,ek->e", v, t)[:, None] * t
+        # The half-plane's direction is its plane's, across the edge (the
+        # line where the partner's plane cuts the plane normal to the edge),
+        # turned towards its centroid: the partner's plane passes up to
+        # EDGE_NEAR from the edge, and the direction to its centroid would
+        # tilt by as much (a wall 0.2 voxel inside its plate's voxel face
+        # stood at 63 degrees, not 90, and hid the plate's splats before it
+        # from eyes between the two). Where the partner's plane is nearly
+        # normal to the edge its centroid's direction stays.
+        along = np.cross(t, nh[other])
+        size = np.linalg.norm(along, axis=1)
+        plane = size >= PHI_PLANE_MIN
+        along = along / np.where(plane, size, 1.0)[:, None]
+        along *= np.where(np.einsum("ek,ek->e", along, v) < 0.0, -1.0, 1.0)[:, None]
+        v = np.where(plane[:, None], along, v)
         phi[q] = np.arctan2(np.einsum("ek,ek->e", v, n1), np.einsum("ek,ek->e", v, u1))
     keep = ~continued
     pr, pf, plen, phi = pr[keep], pf[keep], plen[keep], phi[keep]
