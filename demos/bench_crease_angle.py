@@ -1,6 +1,9 @@
-"""A crease partner's angle about its edge taken from its plane, against
-the direction to its centroid (render/sheet_edges.py, ``PHI_PLANE_MIN``),
-in both texture renderers.
+"""What a crease's partner does, each rule against itself off: ``--rule
+angle`` (default), its angle about the edge taken from its plane, not the
+direction to its centroid (render/sheet_edges.py, ``PHI_PLANE_MIN``), in
+both texture renderers; ``--rule sided``, quality "high" no longer drops a
+one-sided point's splat behind its partner (splat/params.py
+``AA_PARTNER_HIDES_SIDED``), splats only.
 
 Where a surface sheet's edge on a voxel face is creased, the sheet meeting
 it there (its partner) is taken as a half-plane about the edge at an angle
@@ -11,18 +14,23 @@ wall standing 0.2 voxel inside its plate's voxel face, with the plate's top
 0.2 voxel above the voxel's floor, stood at 63 degrees instead of 90, and
 the plate's splats by the wall were dropped for eyes between the two (a
 line of background along a CAD part's inner corner, close up at 256^3).
+A one-sided point's partner is its closed surface's too, wound alike: where
+it lies in front of the point it faces away and is culled, so it hides
+nothing, and dropping the point left a line of background along a lip seen
+from beyond it (a truck's roof).
 
 Per scene (built-in or a mesh file) and camera (the corpus bench's close
 and minified views at ``--resolution``, and the close view at
 ``--close-resolution``, the one ``--resolution auto`` picks there for the
 corpus framing): PSNR (dB) / FLIP against 8x8 polygons inside the object's
 box for 1-spp and 2x2 polygons, and for the volume and quality "high" disc
-splats with the centroid's angle (off) and the plane's (on); and per
+splats with the rule off and on; and per
 renderer the pinholes: pixels whose 3 x 3 neighbourhood the truth covers
 whole but whose alpha is below 0.8. The images are deterministic: no spread
 to report.
 
-    .venv/bin/python demos/bench_crease_angle.py [tree room /path/mesh.stl ...] [--md docs/splat_aa.md]
+    .venv/bin/python demos/bench_crease_angle.py [tree room /path/mesh.stl ...] [--rule angle|sided]
+        [--md docs/splat_aa.md]
 """
 
 from __future__ import annotations
@@ -50,9 +58,16 @@ from aniso3d.build import scenes
 from aniso3d.build.texture import build_texture
 from aniso3d.rendering import sheet_edges
 from aniso3d.rendering.renderer import Renderer
+from aniso3d.rendering.splat import params
 
-BEGIN = "<!-- bench_crease_angle: begin -->"
-END = "<!-- bench_crease_angle: end -->"
+#: Per rule: (module, constant, its value off), the renderers it touches, the Markdown block's name and what
+#: off and on mean.
+RULES = {
+    "angle": ((sheet_edges, "PHI_PLANE_MIN", float("inf")), ("volume", "high"), "bench_crease_angle",
+              "centroid: the partner's angle from the direction to its centroid (before), plane: from its plane"),
+    "sided": ((params, "AA_PARTNER_HIDES_SIDED", True), ("high",), "bench_partner_sided",
+              "off: a one-sided point dropped behind its partner (before), on: never"),
+}  # fmt: skip
 #: A pinhole: alpha below this where the truth covers the pixel and its 8 neighbours whole.
 PINHOLE_ALPHA = 0.8
 METHODS = {"volume": ("volume", {}), "high": ("splat", {"splat": BASELINE["splat"], "quality": "high"})}
@@ -72,13 +87,14 @@ def pinholes(truth_a: np.ndarray, img_a: np.ndarray, crop) -> int:
 
 def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
     mesh, label = scene_or_mesh(name)
+    (module, const, off), methods, _, _ = RULES[args.rule]
+    on = getattr(module, const)
     textures = {r: build_texture(mesh, r, args.directions) for r in {args.resolution, args.close_resolution}}
     # The rule-off drawings from a copy: the splats' clip planes are cached per texture object.
     copies = {r: copy.copy(t) for r, t in textures.items()}
     views = [(spec, args.resolution) for spec in corpus_cameras(mesh, (args.size, args.size), args.resolution)]
     close = [s for s, _ in views if s.label == "close"]
     views.insert(1, (close[0], args.close_resolution))
-    on = sheet_edges.PHI_PLANE_MIN
     rows = []
     with Renderer((args.size, args.size)) as before:
         for spec, res in views:
@@ -88,12 +104,13 @@ def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
             row: dict = {"scene": label, "camera": cam}
             for base, ssaa in POLYGON_BASELINES.items():
                 row[base] = scored(truth, renderer.render(mesh, spec.camera, "mesh", ssaa=ssaa), spec)
-            for key, (method, options) in METHODS.items():
-                sheet_edges.PHI_PLANE_MIN = float("inf")
+            for key in methods:
+                method, options = METHODS[key]
+                setattr(module, const, off)
                 try:
                     old = before.render(copies[res], spec.camera, method, alpha=True, **options)
                 finally:
-                    sheet_edges.PHI_PLANE_MIN = on
+                    setattr(module, const, on)
                 new = renderer.render(textures[res], spec.camera, method, alpha=True, **options)
                 for variant, img in (("off", old), ("on", new)):
                     row[f"{key} {variant}"] = scored(truth, img[..., :3], spec)
@@ -108,29 +125,31 @@ def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
 def main() -> None:
     ap = corpus_parser(__doc__.splitlines()[0], (*scenes.CORPUS, "cube", "sphere"))
     ap.add_argument("--close-resolution", type=int, default=256)
+    ap.add_argument("--rule", choices=sorted(RULES), default="angle")
     args = ap.parse_args()
+    (module, const, off), methods, block, meaning = RULES[args.rule]
     run = run_corpus_demo(args, run_scene)
     head = ["scene", "camera", "1 spp", "2x2"]
-    for key in METHODS:
-        head += [f"{key}, centroid", f"{key}, plane", "Δ PSNR", "Δ FLIP", "pinholes"]
+    for key in methods:
+        head += [f"{key}, off", f"{key}, on", "Δ PSNR", "Δ FLIP", "pinholes"]
     table = []
     for r in run.rows:
         cells = [r["scene"], r["camera"], pair(r["1 spp"]), pair(r["2x2"])]
-        for key in METHODS:
+        for key in methods:
             cells += [pair(r[f"{key} off"]), pair(r[f"{key} on"]), *delta(r[f"{key} on"], r[f"{key} off"]),
                       f"{r[f'{key} off holes']} → {r[f'{key} on holes']}"]  # fmt: skip
         table.append(cells)
     parts = [
-        f"{run.header(command('demos/bench_crease_angle.py', args))} Textures {args.resolution}^3 and "
-        f"{args.close_resolution}^3 (the close view's second row), K = {args.directions}; truth {args.gt_ssaa}x"
-        f"{args.gt_ssaa} polygons; PSNR (dB) / FLIP inside the object's box, as the corpus bench; volume and "
-        f"{BASELINE['splat']} splats, quality \"high\"; centroid: the partner's angle from the direction to "
-        f"its centroid (before), plane: from its plane (PHI_PLANE_MIN {sheet_edges.PHI_PLANE_MIN}); pinholes: "
-        f"pixels the truth covers whole with their 8 neighbours, alpha below {PINHOLE_ALPHA}, centroid → plane.",
+        f"{run.header(command('demos/bench_crease_angle.py', args, '--rule', args.rule))} Textures "
+        f"{args.resolution}^3 and {args.close_resolution}^3 (the close view's second row), K = {args.directions}; "
+        f"truth {args.gt_ssaa}x{args.gt_ssaa} polygons; PSNR (dB) / FLIP inside the object's box, as the corpus "
+        f"bench; {' and '.join(methods)} ({BASELINE['splat']} splats, quality \"high\"); rule {const} "
+        f"{getattr(module, const)} (off: {off}); {meaning}; pinholes: pixels the truth covers whole with their 8 "
+        f"neighbours, alpha below {PINHOLE_ALPHA}, off → on.",
         "",
         markdown_table(head, table),
     ]
-    publish(parts, args.md, BEGIN, END, "Anti-aliased splats")
+    publish(parts, args.md, f"<!-- {block}: begin -->", f"<!-- {block}: end -->", "Anti-aliased splats")
 
 
 if __name__ == "__main__":

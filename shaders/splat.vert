@@ -210,8 +210,18 @@ vec3 bilinear(vec3 a, vec3 b, vec3 c, vec3 d) {
 // direction u from the edge into its voxel, its normal n), the eye's ray to
 // the splat near the edge crosses the other half-plane, at phi from u, when
 // phi lies between 0 and the eye's angle (a box's face seen behind its
-// neighbour at a silhouette, the floor behind the room's front wall).
-bool hidden_at(vec3 c, vec3 n, vec3 eye) {
+// neighbour at a silhouette, the floor behind the room's front wall). Never
+// for a point culled from behind (`sided`): the other surface is its closed
+// surface's too, wound alike (outward normal sin(phi) u - cos(phi) n), so
+// where it lies in front (0 < phi < th) it faces away, sin(phi - th) < 0,
+// and is culled; where phi < th < 0 the point itself faces away. Dropped
+// there, a floor's splats along a lip seen from beyond it left a line of
+// background (params.py AA_PARTNER_HIDES_SIDED, injected as SIDED_HIDDEN).
+#ifndef SIDED_HIDDEN
+#define SIDED_HIDDEN 0
+#endif
+bool hidden_at(vec3 c, vec3 n, vec3 eye, bool sided) {
+    if (sided && SIDED_HIDDEN == 0) return false;
     if (c.x == 0.0 || c.z == 0.0) return false;
     int a = int(abs(c.x) + 0.5) - 1;
     float s = c.x > 0.0 ? 1.0 : -1.0;
@@ -266,7 +276,8 @@ void main() {
 
 #ifdef AA
     // A splat hidden behind the surface meeting it at a clip plane is not drawn.
-    if (hidden_at(in_clip0, n, u_q0 - u_t0 * u_ray[0]) || hidden_at(in_clip1, n, u_q0 - u_t0 * u_ray[0])) {
+    bool sided = u_one_sided && in_size < 0.0;
+    if (hidden_at(in_clip0, n, u_q0 - u_t0 * u_ray[0], sided) || hidden_at(in_clip1, n, u_q0 - u_t0 * u_ray[0], sided)) {
         cull_scattered();
         return;
     }

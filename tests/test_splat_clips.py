@@ -170,6 +170,16 @@ def test_the_surface_meeting_a_splat_hides_it_only_from_where_it_is_in_front():
     assert hidden((0.0, 1.0, 5.0))  # outside the room, above: behind the wall
     assert not hidden((0.0, 1.0, -5.0))  # inside the room: in front of the wall
     assert not hidden((0.0, -1.0, 5.0))  # below the floor: the wall is above it
+    # One-sided (a closed surface's point): never. The wall, wound as the
+    # floor, faces the room (its normal sin(phi) u - cos(phi) n = u = -z);
+    # from outside it is seen from behind, culled, and hides nothing.
+    sided = lambda eye: bool(clip_geometry_np(pos, nrm, clips, np.asarray(eye, float), np.array([True]))[3][0])  # noqa: E731
+    assert not sided((0.0, 1.0, 5.0))
+    assert not sided((0.0, 1.0, -5.0)) and not sided((0.0, -1.0, 5.0))
+    # A crease turning down (phi = -90 degrees: a box's edge, the floor its
+    # top): from outside below, the side hides the top, which faces away.
+    clips[0, 0, 4] = -math.pi / 2
+    assert hidden((0.0, -1.0, 5.0)) and not sided((0.0, -1.0, 5.0))
     clips[0, 0, 4] = 0.0  # an open edge hides nothing
     assert not hidden((0.0, 1.0, 5.0))
 
@@ -269,6 +279,40 @@ def test_no_crack_where_a_wall_meets_a_plate_inside_a_voxel(r):
     assert alpha[plate].min() > 0.99, alpha[plate].min()
 
 
+@pytest.mark.parametrize("one_sided", [True, False])
+def test_a_wall_seen_from_behind_hides_a_one_sided_floor_nowhere(r, one_sided):
+    """Floor points (normal +z, a grid of voxels of H) cut at x <= 0.5 where
+    a wall rises (phi = 90 degrees) that faces the floor, seen from beyond
+    the wall and above, with no wall points drawn (a lip whose face towards
+    the floor a mesh winds as seen from there). Two-sided, the wall would
+    hide the floor's last column, which is dropped; one-sided, the wall is
+    culled from there and the floor stays whole (a CAD part's and a
+    truck's floors showed a line of background along such a lip)."""
+    g = (np.arange(8) + 0.5) * H
+    x, y = (a.ravel() for a in np.meshgrid(0.5 - g[::-1], 0.5 + g - 4 * H))
+    n = x.size
+    clips = np.zeros((n, 2, 5))
+    last = x > 0.5 - H
+    clips[last, 0] = (1.0, 0.0, 0.0, 0.5, math.pi / 2)
+    cloud = PointCloud(np.c_[x, y, np.full(n, 0.5)], np.tile([0.0, 0.0, 1.0], (n, 1)), np.full(n, H * H),
+                       GREY, 0.0, 8.0, one_sided=np.full(n, one_sided), clips=clips)  # fmt: skip
+    cam = Camera((0.5 + 0.12, 0.5, 0.5 + 0.2), (0.5 - 3 * H, 0.5, 0.5), fov=40.0)
+    alpha, view = draw_alpha(r, cloud, cam)
+    hit = hit_points(view, 0.5)
+    px = px_size(view, 0.5) * 2.0
+    # The column's half by the edge: the next column's discs (radius 0.7 H) reach the rest.
+    column = (hit[..., 0] > 0.5 - 0.5 * H + px) & (hit[..., 0] < 0.5 - px) & (np.abs(hit[..., 1] - 0.5) < 3 * H)
+    assert column.sum() > 20, column.sum()
+    frags = clip_geometry_np(cloud.positions, cloud.normals, clips, np.asarray(cam.position, float),
+                             cloud.one_sided)[3]  # fmt: skip
+    if one_sided:
+        assert not frags.any()
+        assert alpha[column].min() > 0.99, alpha[column].min()
+    else:
+        assert frags[last].all() and not frags[~last].any()
+        assert alpha[column].max() < 0.5, alpha[column].max()
+
+
 @pytest.mark.parametrize("pixel_error", [8.0, 16.0, 32.0])
 def test_no_coverage_past_a_walls_end_at_every_level(r, pixel_error):
     """The same wall drawn close up through its pyramid (level of detail),
@@ -341,6 +385,47 @@ def test_gpu_matches_the_twin_with_cut_splats(r):
         clips[on, k, 3] = sign[on] * pos[on, axis] + rng.uniform(0.05, 0.6, on.sum()) * px
     cloud = PointCloud(pos, np.tile([0.0, 0.0, 1.0], (n, 1)), np.full(n, (0.7 * px) ** 2),
                        rng.uniform(0.1, 0.9, (n, 3)), np.zeros(n), np.full(n, 8.0), clips=clips)  # fmt: skip
+    img_alpha, view = draw_alpha(r, cloud, cam)
+    frags = subpixel_fragments_np(cloud, view, SplatOptions(quality="high"))
+    rgb, alpha = composite_np(frags, view.lighting.background)
+    assert np.abs(img_alpha - alpha).max() < 2e-4, np.abs(img_alpha - alpha).max()
+
+
+def test_gpu_matches_the_twin_on_which_splats_their_partners_hide(r):
+    """Sub-pixel splats, each with a clip plane whose partner meets it at a
+    random angle, half of them one-sided, seen from a slant: the GPU drops
+    the splats the twin drops (two-sided ones whose partner lies in front of
+    them; one-sided ones never, their partners there facing away), pixel by
+    pixel."""
+    cam = Camera((1.2, 0.4, 2.6), (0.0, 0.0, 0.0), fov=40.0)
+    px = 2.9 * 2 * math.tan(math.radians(20.0)) / SIZE[1]
+    rng = np.random.default_rng(11)
+    g = (np.arange(-16, 16, 0.8) + 0.4) * px
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    n = x.size
+    pos = np.c_[x, y, np.zeros(n)]
+    axis = rng.integers(0, 2, n)
+    sign = np.where(rng.random(n) < 0.5, 1.0, -1.0)
+    clips = np.zeros((n, 2, 5))
+    clips[np.arange(n), 0, axis] = sign
+    clips[:, 0, 3] = sign * pos[np.arange(n), axis] + 0.3 * px
+    clips[:, 0, 4] = rng.uniform(-2.8, 2.8, n)
+    sided = rng.random(n) < 0.5
+    cloud = PointCloud(pos, np.tile([0.0, 0.0, 1.0], (n, 1)), np.full(n, (0.7 * px) ** 2),
+                       rng.uniform(0.1, 0.9, (n, 3)), np.zeros(n), np.full(n, 8.0), one_sided=sided,
+                       clips=clips)  # fmt: skip
+    eye = np.asarray(cam.position, float)
+    hidden = clip_geometry_np(pos, cloud.normals, clips, eye, sided)[3]
+    as_two_sided = clip_geometry_np(pos, cloud.normals, clips, eye)[3]
+    # Two-sided points hidden; one-sided ones the same partners would hide, kept.
+    assert (hidden & ~sided).sum() > 20 and (as_two_sided & sided).sum() > 20
+    assert not (hidden & sided).any() and np.array_equal(hidden, as_two_sided & ~sided)
+    # ... as their partners, wound alike, face away from the eye (outward normal sin(phi) u - cos(phi) n).
+    q, _, _, _ = clip_geometry_np(pos, cloud.normals, clips, eye)
+    m = clips[:, 0, :3]
+    u = -(m - m[:, 2:3] * np.array([0.0, 0.0, 1.0]))
+    n2 = np.sin(clips[:, 0, 4])[:, None] * u - np.cos(clips[:, 0, 4])[:, None] * np.array([0.0, 0.0, 1.0])
+    assert np.all(np.einsum("nc,nc->n", n2, eye - q[:, 0])[as_two_sided] < 0.0)
     img_alpha, view = draw_alpha(r, cloud, cam)
     frags = subpixel_fragments_np(cloud, view, SplatOptions(quality="high"))
     rgb, alpha = composite_np(frags, view.lighting.background)

@@ -84,6 +84,15 @@ AA_CLOSE_SIDED = 0.8
 #: minified; 0.25 reopened the blob's pinholes close up (-0.11 dB)
 #: (demos/sweep_close_own.py, docs/splat_aa.md).
 AA_CLOSE_OWN = 0.1
+#: Whether, in quality "high", a one-sided point (culled from behind) is
+#: dropped where the surface meeting it at a clip plane lies in front of it
+#: (the crease partner's angle, :mod:`~aniso3d.rendering.splat.clips`). No:
+#: that surface is the point's closed surface too, wound alike, and there it
+#: faces away from the eye and is culled (or the point itself faces away),
+#: so it hides nothing; dropped, a floor's splats along a lip seen from
+#: beyond it left a line of background (a truck's roof, a CAD part's
+#: inner corners; demos/bench_crease_angle.py --rule sided, docs/splat_aa.md).
+AA_PARTNER_HIDES_SIDED = False
 #: A fragment's depth in quality "high" is where its pixel's ray meets the
 #: splat's plane, kept within the splat's bounding sphere grown by this many
 #: pixels (at the splat's depth): the fragments of a tilted surface tiled by

@@ -126,6 +126,7 @@ class SplatPipeline:
                 AA=1, LAYERS=AA_LAYERS, SLICES=AA_SLICES, FILTER=AA_FILTER, PLANE_REACH=float(AA_PLANE_REACH),
                 LAST_WEIGHTS=int(params.AA_LAST_WEIGHTS), SURFACE_REACH=float(params.AA_SURFACE_REACH),
                 SHEET_REACH=int(params.AA_SHEET_REACH), SHEET_GRAZE=float(params.AA_SHEET_GRAZE),
+                SIDED_HIDDEN=int(params.AA_PARTNER_HIDES_SIDED),
             )
             if clips:
                 defines.update(CLIPS=1, CLIP_TABLE_PER_ROW=CLIP_TABLE_PER_ROW)

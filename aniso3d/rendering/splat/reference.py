@@ -160,13 +160,19 @@ def rect_kept_np(lo: np.ndarray, hi: np.ndarray, line: np.ndarray) -> np.ndarray
     return np.where(full > 0, kept, 0.0)
 
 
-def clip_geometry_np(positions: np.ndarray, normals: np.ndarray, clips: np.ndarray, eye: np.ndarray):
+def clip_geometry_np(
+    positions: np.ndarray, normals: np.ndarray, clips: np.ndarray, eye: np.ndarray, sided: np.ndarray | None = None
+):
     """For each point's clip planes (:attr:`~aniso3d.build.points.PointCloud.clips`,
     (N, 2, 5)): the edge's point nearest the centre ``q`` (N, 2, 3), the
     edge's direction (N, 2, 3), whether the plane is set (N, 2), and whether
     the surface meeting the splat there hides it from ``eye`` (N,): the eye's
     angle about the edge, from the splat's direction into its voxel, lies
-    beyond the meeting surface's (splat.vert hidden_at())."""
+    beyond the meeting surface's; never for a point ``sided`` ((N,) bool, the
+    one-sided points culled from behind): that surface, wound as the point's
+    closed surface is, faces away where it lies in front and is culled, or
+    the point does (:data:`~aniso3d.rendering.splat.params.AA_PARTNER_HIDES_SIDED`;
+    splat.vert hidden_at())."""
     m, o, phi = clips[..., :3], clips[..., 3], clips[..., 4]
     n = normals.astype(np.float64)[:, None, :]
     mp = m - np.einsum("nkc,nkc->nk", m, np.broadcast_to(n, m.shape))[..., None] * n
@@ -179,6 +185,8 @@ def clip_geometry_np(positions: np.ndarray, normals: np.ndarray, clips: np.ndarr
     e = eye[None, None, :] - q
     th = np.arctan2(np.einsum("nkc,nkc->nk", e, np.broadcast_to(n, e.shape)), np.einsum("nkc,nkc->nk", e, u))
     hidden = ok & (phi != 0) & (phi * th > 0) & (np.abs(phi) < np.abs(th))
+    if sided is not None and not params.AA_PARTNER_HIDES_SIDED:
+        hidden &= ~np.asarray(sided, bool)[:, None]
     along = np.cross(np.broadcast_to(n, m.shape), m)
     along /= np.maximum(np.linalg.norm(along, axis=-1, keepdims=True), 1e-300)
     return q, along, ok, hidden.any(axis=1)
@@ -224,7 +232,8 @@ def subpixel_fragments_np(cloud: PointCloud, view: FrameView, opts: SplatOptions
         keep &= ~(cloud.one_sided & (facing > 0))
         counts = np.where(cloud.one_sided, 2.0, 1.0)
     if cloud.clips is not None:
-        keep &= ~clip_geometry_np(cloud.positions, cloud.normals, cloud.clips, eye)[3]
+        sided = cloud.one_sided if culling else None
+        keep &= ~clip_geometry_np(cloud.positions, cloud.normals, cloud.clips, eye, sided)[3]
     if not keep.all():
         counts = counts[keep]
         cloud = PointCloud(cloud.positions[keep], cloud.normals[keep], cloud.areas[keep], cloud.kd[keep],
