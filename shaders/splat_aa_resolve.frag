@@ -14,7 +14,10 @@
 //     the pixel and its four neighbours reaches CLOSE_MEAN (CLOSE_MEAN_SIDED
 //     where the pixel holds a one-sided splat, u_visible's blue 0), a neighbour
 //     counting when its nearest surface starts less than CLOSE_REACH u_span
-//     slices from this one's (0 otherwise, and off the image), and the
+//     slices from this one's, plus, where the pixel holds a one-sided splat
+//     (CLOSE_SLOPE), the slices its surface's depth changes across a pixel
+//     (u_visible's least reach past its start: a closed surface at a grazing
+//     angle) (0 otherwise, and off the image), and the
 //     pixel's own sum reaches CLOSE_OWN (a speck is not its surface): sub-pixel
 //     footprints (boxes at the splats' centres) do not tile a sheet exactly,
 //     so its sums scatter about 1 where it is whole, and what lies behind
@@ -37,6 +40,9 @@
 #ifndef LAYERS
 #define LAYERS 4
 #endif
+#ifndef CLOSE_SLOPE  // injected from aniso3d/rendering/splat/params.py (AA_CLOSE_SLOPE)
+#define CLOSE_SLOPE 1
+#endif
 #ifndef CLOSE_MEAN  // injected from aniso3d/rendering/splat/params.py (AA_CLOSE, AA_CLOSE_SIDED)
 #define CLOSE_MEAN 0.9
 #define CLOSE_REACH 3.0
@@ -55,6 +61,7 @@ uniform float u_near;
 uniform float u_range;         // far - near
 uniform vec3 u_background;
 uniform float u_span;          // slices one surface spans (splat_surfaces.frag)
+uniform vec2 u_slices;         // (lo, scale): slice coordinate (z - lo) scale of a linear depth z
 uniform int u_mode;
 
 out vec4 f_color;
@@ -77,25 +84,27 @@ void layer(vec4 acc, float n, float total, bool is_whole, inout vec3 colour, ino
           false, colour, trans)
 
 // What a neighbour q adds to the whole-surface test: min(1, its first
-// layer's sum) where its nearest surface starts within CLOSE_REACH spans of
+// layer's sum) where its nearest surface starts within `within` slices of
 // start, else 0 (and off the image).
-float neighbour(ivec2 q, ivec2 size, float start) {
+float neighbour(ivec2 q, ivec2 size, float start, float within) {
     if (any(lessThan(q, ivec2(0))) || any(greaterThanEqual(q, size))) return 0.0;
     float c = texelFetch(u_layer[0], q, 0).a;
     float s = float(texelFetch(u_surfaces, q, 0).w & 0xFFFFu);
-    return c > 0.0 && abs(s - start) < CLOSE_REACH * u_span ? min(c, 1.0) : 0.0;
+    return c > 0.0 && abs(s - start) < within ? min(c, 1.0) : 0.0;
 }
 
 // Whether the nearest surface, summing to own here and starting at slice
-// start, is whole (see the top). Four calls, not a loop over an array of
+// start, is whole (see the top); slope: the slices its depth changes across
+// a pixel, where it counts. Four calls, not a loop over an array of
 // offsets: llvmpipe puts an indexed local array in memory.
-bool whole(ivec2 px, float own, float start, float mean) {
+bool whole(ivec2 px, float own, float start, float mean, float slope) {
     // Above 1 it is whole anyway; below 5 mean - 4 the neighbours cannot
     // make it; below CLOSE_OWN it is a speck, not this pixel's surface.
     if (!(own >= max(5.0 * mean - 4.0, CLOSE_OWN) && own < 1.0)) return false;
     ivec2 size = textureSize(u_layer[0], 0);
-    float sum = own + neighbour(px + ivec2(1, 0), size, start) + neighbour(px - ivec2(1, 0), size, start)
-              + neighbour(px + ivec2(0, 1), size, start) + neighbour(px - ivec2(0, 1), size, start);
+    float within = CLOSE_REACH * u_span + slope;
+    float sum = own + neighbour(px + ivec2(1, 0), size, start, within) + neighbour(px - ivec2(1, 0), size, start, within)
+              + neighbour(px + ivec2(0, 1), size, start, within) + neighbour(px - ivec2(0, 1), size, start, within);
     return sum >= 5.0 * mean;
 }
 
@@ -114,7 +123,9 @@ void main() {
     vec4 first = texelFetch(u_layer[0], px, 0);
     vec4 acc;
     float front = first.a;
-    layer(first, LAYERS == 1 ? last : 1.0, first.a, LAYERS > 1 && whole(px, first.a, float(sw & 0xFFFFu), mean), colour, trans);
+    float start = float(sw & 0xFFFFu);
+    float slope = CLOSE_SLOPE != 0 && seen.b < 0.5 ? max(floor((seen.g - u_slices.x) * u_slices.y) - start, 0.0) : 0.0;
+    layer(first, LAYERS == 1 ? last : 1.0, first.a, LAYERS > 1 && whole(px, first.a, start, mean, slope), colour, trans);
 #if LAYERS > 1
     LAYER(1);
 #endif

@@ -68,20 +68,21 @@ def points_of(mesh: Mesh) -> tuple:
 
 def draw_rgba(r, cloud: PointCloud | LodPoints, cam: Camera, **options) -> tuple[np.ndarray, FrameView]:
     """(H, W, 4) float32 RGBA of ``cloud`` drawn with ``options`` (quality
-    "high" unless given), row 0 at the top."""
+    "high" unless given) at ``r``'s size, row 0 at the top."""
     impl = r.method_renderer("splat")
     handle = impl.upload(cloud)
     near, far = cam.clip_range(handle.bounds)
-    view = FrameView(cam, r.lighting, SIZE, near, far)
+    size = tuple(r.size)
+    view = FrameView(cam, r.lighting, size, near, far)
     ctx = r.gl.ctx
-    col, dep = ctx.texture(SIZE, 4, dtype="f4"), ctx.depth_texture(SIZE)
+    col, dep = ctx.texture(size, 4, dtype="f4"), ctx.depth_texture(size)
     fbo = ctx.framebuffer([col], dep)
     try:
         fbo.use()
-        ctx.viewport = (0, 0, *SIZE)
+        ctx.viewport = (0, 0, *size)
         fbo.clear(*r.lighting.background, 0.0, depth=1.0)
         impl.draw(handle, view, fbo=fbo, **{"quality": "high", **options})
-        img = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(SIZE[1], SIZE[0], 4)
+        img = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(size[1], size[0], 4)
     finally:
         for obj in (fbo, col, dep):
             obj.release()

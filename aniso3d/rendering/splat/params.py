@@ -72,6 +72,15 @@ AA_CLOSE = (0.9, 3.0)
 #: within 0.1 dB; 0.7 gives the blob +2.6 dB but the cube -3.6 dB minified
 #: (its edges closed where they are not whole), 0.6 more so.
 AA_CLOSE_SIDED = 0.8
+#: Where the pixel holds a one-sided splat, a neighbour counts in that test
+#: when its nearest surface starts within CLOSE_REACH spans plus the slices
+#: this pixel's nearest surface's depth changes across a pixel (its least
+#: reach, :data:`AA_SURFACE_REACH`, past its start): a closed surface seen
+#: at a grazing angle (a low-poly head's brow, a truck's roof at 84 degrees
+#: from their normals) changes depth by several slices a pixel, its
+#: neighbours' surfaces did not count, and a band of it drew as a sieve of
+#: background (demos/bench_pinholes.py --rule slope, docs/splat_aa.md).
+AA_CLOSE_SLOPE = True
 #: ... and in either case the pixel's own sum must reach this: with the
 #: sided mean, 5 x 0.8 - 4 = 0 set no floor, so a speck of a sheet lying
 #: just in front of a closed surface (a scan's stray faces, covering 1 % of
@@ -91,7 +100,7 @@ AA_CLOSE_OWN = 0.1
 #: faces away from the eye and is culled (or the point itself faces away),
 #: so it hides nothing; dropped, a floor's splats along a lip seen from
 #: beyond it left a line of background (a truck's roof, a CAD part's
-#: inner corners; demos/bench_crease_angle.py --rule sided, docs/splat_aa.md).
+#: inner corners; demos/bench_pinholes.py --rule sided, docs/splat_aa.md).
 AA_PARTNER_HIDES_SIDED = False
 #: A fragment's depth in quality "high" is where its pixel's ray meets the
 #: splat's plane, kept within the splat's bounding sphere grown by this many

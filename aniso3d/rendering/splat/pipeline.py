@@ -186,6 +186,7 @@ class SplatPipeline:
             mean, reach_ = (float(x) for x in params.AA_CLOSE)
             defines = {"LAYERS": AA_LAYERS, "WORDS": AA_SLICES // 32, "CLOSE_MEAN": mean, "CLOSE_REACH": reach_,
                        "CLOSE_MEAN_SIDED": float(params.AA_CLOSE_SIDED), "CLOSE_OWN": float(params.AA_CLOSE_OWN),
+                       "CLOSE_SLOPE": int(params.AA_CLOSE_SLOPE),
                        "CHAIN": float(params.AA_SHEET_CHAIN)}  # fmt: skip
         if far:
             defines["FAR"] = 1

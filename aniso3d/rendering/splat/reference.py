@@ -412,20 +412,27 @@ def _shifted(a: np.ndarray, dy: int, dx: int, fill: float) -> np.ndarray:
     return out
 
 
-def closed_np(own: np.ndarray, start: np.ndarray, span: float, sided: np.ndarray | None = None) -> np.ndarray:
+def closed_np(
+    own: np.ndarray, start: np.ndarray, span: float, sided: np.ndarray | None = None, slope: np.ndarray | None = None
+) -> np.ndarray:
     """(H, W) bool: where the nearest surface is whole (rule step 5), from its
     sum of coverages ``own`` (H, W) and first slice ``start`` (H, W; inf
     where the pixel holds nothing); ``sided`` (H, W) bool: the pixel holds a
     one-sided splat drawn with its back culled (the mean is then
-    :data:`~aniso3d.rendering.splat.params.AA_CLOSE_SIDED`). The pixel's own
-    sum must reach :data:`~aniso3d.rendering.splat.params.AA_CLOSE_OWN`."""
+    :data:`~aniso3d.rendering.splat.params.AA_CLOSE_SIDED`); ``slope`` (H,
+    W): slices its nearest surface's depth changes across a pixel, which a
+    neighbour's start may lie beyond the reach (where ``sided``: a closed
+    surface seen at a grazing angle, its neighbours' starts several slices
+    apart). The pixel's own sum must reach
+    :data:`~aniso3d.rendering.splat.params.AA_CLOSE_OWN`."""
     mean, reach = (float(x) for x in params.AA_CLOSE)
     min_mean = mean if sided is None else np.where(sided, float(params.AA_CLOSE_SIDED), mean)
+    within = reach * span + (0.0 if slope is None else slope)
     total = np.minimum(own, 1.0)
     for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0)):
         c, s = _shifted(own, dy, dx, 0.0), _shifted(start, dy, dx, np.inf)
         with np.errstate(invalid="ignore"):
-            same = (c > 0) & (np.abs(s - start) < reach * span)
+            same = (c > 0) & (np.abs(s - start) < within)
         total += np.where(same, np.minimum(c, 1.0), 0.0)
     return (own < 1.0) & (own >= float(params.AA_CLOSE_OWN)) & (total >= 5.0 * min_mean)
 
@@ -492,10 +499,18 @@ def composite_np(
     cw = c * np.where(j > 0, (1.0 - mean_cover[pixel]) ** j, 1.0)
     np.add.at(weight, (pixel, layer), cw)
     np.add.at(colour, (pixel, layer), rgb * cw[:, None])
-    sided = None
+    sided = slope = None
     if frags.counts is not None:
         sided = np.bincount(pixel, np.asarray(frags.counts, np.float64)[keep] > 1, w * h).reshape(h, w) > 0
-    whole = closed_np(total[:, 0].reshape(h, w), starts[:, 0].reshape(h, w), span, sided).ravel() & (layers > 1)
+        if frags.reach is not None and params.AA_CLOSE_SLOPE:
+            # The nearest surface's depth change across a pixel: its least reach's slice past its start.
+            least = np.full(w * h, np.inf)
+            np.minimum.at(least, pixel, np.asarray(frags.reach, np.float64)[keep])
+            with np.errstate(invalid="ignore"):
+                rise = np.floor((least - frags.slicing[0]) * frags.slicing[1]) - starts[:, 0]
+            slope = np.where(sided.ravel() & np.isfinite(rise), np.maximum(rise, 0.0), 0.0).reshape(h, w)
+    whole = closed_np(total[:, 0].reshape(h, w), starts[:, 0].reshape(h, w), span, sided, slope).ravel()
+    whole &= layers > 1
     out = np.zeros((w * h, 3))
     trans = np.ones(w * h)
     last = np.maximum(count - (layers - 1), 1).astype(np.float64)

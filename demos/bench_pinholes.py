@@ -1,9 +1,12 @@
-"""What a crease's partner does, each rule against itself off: ``--rule
-angle`` (default), its angle about the edge taken from its plane, not the
-direction to its centroid (render/sheet_edges.py, ``PHI_PLANE_MIN``), in
-both texture renderers; ``--rule sided``, quality "high" no longer drops a
-one-sided point's splat behind its partner (splat/params.py
-``AA_PARTNER_HIDES_SIDED``), splats only.
+"""Rules that keep closed surfaces free of pinholes, each against itself
+off, in the texture renderers: ``--rule angle`` (default), a crease
+partner's angle about its edge taken from its plane, not the direction to
+its centroid (render/sheet_edges.py, ``PHI_PLANE_MIN``), in both renderers;
+``--rule sided``, quality "high" no longer drops a one-sided point's splat
+behind its crease partner (splat/params.py ``AA_PARTNER_HIDES_SIDED``);
+``--rule slope``, quality "high"'s whole-surface test counts a neighbour
+within the closure's reach plus this pixel's depth change across a pixel
+(``AA_CLOSE_SLOPE``). The last two: splats only.
 
 Where a surface sheet's edge on a voxel face is creased, the sheet meeting
 it there (its partner) is taken as a half-plane about the edge at an angle
@@ -17,19 +20,21 @@ line of background along a CAD part's inner corner, close up at 256^3).
 A one-sided point's partner is its closed surface's too, wound alike: where
 it lies in front of the point it faces away and is culled, so it hides
 nothing, and dropping the point left a line of background along a lip seen
-from beyond it (a truck's roof).
+from beyond it (a truck's roof). A closed surface seen at a grazing angle
+changes depth by several slices a pixel, so neighbouring pixels' nearest
+surfaces start farther apart than the closure's reach and did not count:
+a low-poly head's brow drew as a sieve of background.
 
 Per scene (built-in or a mesh file) and camera (the corpus bench's close
 and minified views at ``--resolution``, and the close view at
 ``--close-resolution``, the one ``--resolution auto`` picks there for the
 corpus framing): PSNR (dB) / FLIP against 8x8 polygons inside the object's
 box for 1-spp and 2x2 polygons, and for the volume and quality "high" disc
-splats with the rule off and on; and per
-renderer the pinholes: pixels whose 3 x 3 neighbourhood the truth covers
-whole but whose alpha is below 0.8. The images are deterministic: no spread
-to report.
+splats with the rule off and on; and per renderer the pinholes: pixels
+whose 3 x 3 neighbourhood the truth covers whole but whose alpha is below
+0.8. The images are deterministic: no spread to report.
 
-    .venv/bin/python demos/bench_crease_angle.py [tree room /path/mesh.stl ...] [--rule angle|sided]
+    .venv/bin/python demos/bench_pinholes.py [tree room /path/mesh.stl ...] [--rule angle|sided|slope]
         [--md docs/splat_aa.md]
 """
 
@@ -67,6 +72,8 @@ RULES = {
               "centroid: the partner's angle from the direction to its centroid (before), plane: from its plane"),
     "sided": ((params, "AA_PARTNER_HIDES_SIDED", True), ("high",), "bench_partner_sided",
               "off: a one-sided point dropped behind its partner (before), on: never"),
+    "slope": ((params, "AA_CLOSE_SLOPE", False), ("high",), "bench_close_slope",
+              "off: a neighbour counts within the closure's reach (before), on: plus the pixel's depth change"),
 }  # fmt: skip
 #: A pinhole: alpha below this where the truth covers the pixel and its 8 neighbours whole.
 PINHOLE_ALPHA = 0.8
@@ -140,7 +147,7 @@ def main() -> None:
                       f"{r[f'{key} off holes']} → {r[f'{key} on holes']}"]  # fmt: skip
         table.append(cells)
     parts = [
-        f"{run.header(command('demos/bench_crease_angle.py', args, '--rule', args.rule))} Textures "
+        f"{run.header(command('demos/bench_pinholes.py', args, '--rule', args.rule))} Textures "
         f"{args.resolution}^3 and {args.close_resolution}^3 (the close view's second row), K = {args.directions}; "
         f"truth {args.gt_ssaa}x{args.gt_ssaa} polygons; PSNR (dB) / FLIP inside the object's box, as the corpus "
         f"bench; {' and '.join(methods)} ({BASELINE['splat']} splats, quality \"high\"); rule {const} "
