@@ -1,38 +1,39 @@
-"""Rules that keep closed surfaces free of pinholes, each against itself
-off, in the texture renderers: ``--rule angle`` (default), a crease
+"""Rules that keep quality "high" splats of closed surfaces free of
+pinholes, each against itself off: ``--rule angle`` (default), a crease
 partner's angle about its edge taken from its plane, not the direction to
-its centroid (render/sheet_edges.py, ``PHI_PLANE_MIN``), in both renderers;
-``--rule sided``, quality "high" no longer drops a one-sided point's splat
-behind its crease partner (splat/params.py ``AA_PARTNER_HIDES_SIDED``);
-``--rule slope``, quality "high"'s whole-surface test counts a neighbour
-within the closure's reach plus this pixel's depth change across a pixel
-(``AA_CLOSE_SLOPE``). The last two: splats only.
+its centroid, for the splats' clip planes (render/sheet_edges.py
+``PHI_PLANE_MIN``; the volume keeps the centroid's, its crease ramps lost
+up to 0.13 dB with the plane's); ``--rule sided``, a one-sided point's
+splat is never dropped behind its crease partner (splat/params.py
+``AA_PARTNER_HIDES_SIDED``); ``--rule slope``, the whole-surface test counts
+a neighbour within the closure's reach plus this pixel's depth change
+across a pixel (``AA_CLOSE_SLOPE``).
 
 Where a surface sheet's edge on a voxel face is creased, the sheet meeting
 it there (its partner) is taken as a half-plane about the edge at an angle
-phi: the volume's silhouette ramps and quality "high"'s drop of splats the
-partner hides read it. The partner's plane passes up to ``EDGE_NEAR`` from
-the edge, so the direction to its centroid can tilt far from its plane's: a
-wall standing 0.2 voxel inside its plate's voxel face, with the plate's top
-0.2 voxel above the voxel's floor, stood at 63 degrees instead of 90, and
-the plate's splats by the wall were dropped for eyes between the two (a
-line of background along a CAD part's inner corner, close up at 256^3).
-A one-sided point's partner is its closed surface's too, wound alike: where
-it lies in front of the point it faces away and is culled, so it hides
-nothing, and dropping the point left a line of background along a lip seen
-from beyond it (a truck's roof). A closed surface seen at a grazing angle
-changes depth by several slices a pixel, so neighbouring pixels' nearest
-surfaces start farther apart than the closure's reach and did not count:
-a low-poly head's brow drew as a sieve of background.
+phi, and quality "high" drops a splat the partner hides from the eye. The
+partner's plane passes up to ``EDGE_NEAR`` from the edge, so the direction
+to its centroid can tilt far from its plane's: a wall standing 0.2 voxel
+inside its plate's voxel face, with the plate's top 0.2 voxel above the
+voxel's floor, stood at 63 degrees instead of 90, and the plate's splats by
+the wall were dropped for eyes between the two (a line of background along
+a CAD part's inner corner, close up at 256^3). A one-sided point's partner
+is its closed surface's too, wound alike: where it lies in front of the
+point it faces away and is culled, so it hides nothing, and dropping the
+point left a line of background along a lip seen from beyond it (a truck's
+roof). A closed surface seen at a grazing angle changes depth by several
+slices a pixel, so neighbouring pixels' nearest surfaces start farther
+apart than the closure's reach and did not count: a low-poly head's brow
+drew as a sieve of background.
 
 Per scene (built-in or a mesh file) and camera (the corpus bench's close
 and minified views at ``--resolution``, and the close view at
 ``--close-resolution``, the one ``--resolution auto`` picks there for the
 corpus framing): PSNR (dB) / FLIP against 8x8 polygons inside the object's
-box for 1-spp and 2x2 polygons, and for the volume and quality "high" disc
-splats with the rule off and on; and per renderer the pinholes: pixels
-whose 3 x 3 neighbourhood the truth covers whole but whose alpha is below
-0.8. The images are deterministic: no spread to report.
+box for 1-spp and 2x2 polygons, and for quality "high" disc splats with the
+rule off and on; and the pinholes: pixels whose 3 x 3 neighbourhood the
+truth covers whole but whose alpha is below 0.8. The images are
+deterministic: no spread to report.
 
     .venv/bin/python demos/bench_pinholes.py [tree room /path/mesh.stl ...] [--rule angle|sided|slope]
         [--md docs/splat_aa.md]
@@ -65,19 +66,18 @@ from aniso3d.rendering import sheet_edges
 from aniso3d.rendering.renderer import Renderer
 from aniso3d.rendering.splat import params
 
-#: Per rule: (module, constant, its value off), the renderers it touches, the Markdown block's name and what
-#: off and on mean.
+#: Per rule: (module, constant, its value off), the Markdown block's name and what off and on mean.
 RULES = {
-    "angle": ((sheet_edges, "PHI_PLANE_MIN", float("inf")), ("volume", "high"), "bench_crease_angle",
+    "angle": ((sheet_edges, "PHI_PLANE_MIN", float("inf")), "bench_crease_angle",
               "centroid: the partner's angle from the direction to its centroid (before), plane: from its plane"),
-    "sided": ((params, "AA_PARTNER_HIDES_SIDED", True), ("high",), "bench_partner_sided",
+    "sided": ((params, "AA_PARTNER_HIDES_SIDED", True), "bench_partner_sided",
               "off: a one-sided point dropped behind its partner (before), on: never"),
-    "slope": ((params, "AA_CLOSE_SLOPE", False), ("high",), "bench_close_slope",
+    "slope": ((params, "AA_CLOSE_SLOPE", False), "bench_close_slope",
               "off: a neighbour counts within the closure's reach (before), on: plus the pixel's depth change"),
 }  # fmt: skip
 #: A pinhole: alpha below this where the truth covers the pixel and its 8 neighbours whole.
 PINHOLE_ALPHA = 0.8
-METHODS = {"volume": ("volume", {}), "high": ("splat", {"splat": BASELINE["splat"], "quality": "high"})}
+METHODS = {"high": ("splat", {"splat": BASELINE["splat"], "quality": "high"})}
 
 
 def pinholes(truth_a: np.ndarray, img_a: np.ndarray, crop) -> int:
@@ -94,7 +94,7 @@ def pinholes(truth_a: np.ndarray, img_a: np.ndarray, crop) -> int:
 
 def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
     mesh, label = scene_or_mesh(name)
-    (module, const, off), methods, _, _ = RULES[args.rule]
+    (module, const, off), _, _ = RULES[args.rule]
     on = getattr(module, const)
     textures = {r: build_texture(mesh, r, args.directions) for r in {args.resolution, args.close_resolution}}
     # The rule-off drawings from a copy: the splats' clip planes are cached per texture object.
@@ -111,8 +111,7 @@ def run_scene(name: str, args, renderer: Renderer) -> list[dict]:
             row: dict = {"scene": label, "camera": cam}
             for base, ssaa in POLYGON_BASELINES.items():
                 row[base] = scored(truth, renderer.render(mesh, spec.camera, "mesh", ssaa=ssaa), spec)
-            for key in methods:
-                method, options = METHODS[key]
+            for key, (method, options) in METHODS.items():
                 setattr(module, const, off)
                 try:
                     old = before.render(copies[res], spec.camera, method, alpha=True, **options)
@@ -134,15 +133,15 @@ def main() -> None:
     ap.add_argument("--close-resolution", type=int, default=256)
     ap.add_argument("--rule", choices=sorted(RULES), default="angle")
     args = ap.parse_args()
-    (module, const, off), methods, block, meaning = RULES[args.rule]
+    (module, const, off), block, meaning = RULES[args.rule]
     run = run_corpus_demo(args, run_scene)
     head = ["scene", "camera", "1 spp", "2x2"]
-    for key in methods:
+    for key in METHODS:
         head += [f"{key}, off", f"{key}, on", "Δ PSNR", "Δ FLIP", "pinholes"]
     table = []
     for r in run.rows:
         cells = [r["scene"], r["camera"], pair(r["1 spp"]), pair(r["2x2"])]
-        for key in methods:
+        for key in METHODS:
             cells += [pair(r[f"{key} off"]), pair(r[f"{key} on"]), *delta(r[f"{key} on"], r[f"{key} off"]),
                       f"{r[f'{key} off holes']} → {r[f'{key} on holes']}"]  # fmt: skip
         table.append(cells)
@@ -150,7 +149,7 @@ def main() -> None:
         f"{run.header(command('demos/bench_pinholes.py', args, '--rule', args.rule))} Textures "
         f"{args.resolution}^3 and {args.close_resolution}^3 (the close view's second row), K = {args.directions}; "
         f"truth {args.gt_ssaa}x{args.gt_ssaa} polygons; PSNR (dB) / FLIP inside the object's box, as the corpus "
-        f"bench; {' and '.join(methods)} ({BASELINE['splat']} splats, quality \"high\"); rule {const} "
+        f"bench; {BASELINE['splat']} splats, quality \"high\"; rule {const} "
         f"{getattr(module, const)} (off: {off}); {meaning}; pinholes: pixels the truth covers whole with their 8 "
         f"neighbours, alpha below {PINHOLE_ALPHA}, off → on.",
         "",

@@ -59,9 +59,12 @@ EDGE_MIN_LENGTH = 0.05
 EDGE_SLANT = 0.5
 #: Edges kept per sheet (two: a box's corner).
 MAX_EDGES = 2
-#: A crease partner's angle about the edge is its plane's where the plane
-#: cuts the plane normal to the edge at least this steeply (the sine of the
-#: angle between its normal and the edge), else its centroid's direction.
+#: For the splats' clip planes (:func:`sheet_edges` ``plane_angle``), a
+#: crease partner's angle about the edge is its plane's where the plane cuts
+#: the plane normal to the edge at least this steeply (the sine of the angle
+#: between its normal and the edge), else its centroid's direction. The
+#: volume keeps the centroid's: its crease ramps lost up to 0.13 dB with the
+#: plane's (the lattice close up at 256^3; demos/bench_pinholes.py).
 PHI_PLANE_MIN = 0.5
 #: Edge kinds.
 OPEN, CREASE = 0, 1
@@ -174,12 +177,14 @@ def face_segments(normal: np.ndarray, offset: np.ndarray) -> tuple[np.ndarray, n
     return length, mid
 
 
-def sheet_edges(texture, sheets, surface: np.ndarray) -> SheetEdges:
+def sheet_edges(texture, sheets, surface: np.ndarray, plane_angle: bool = False) -> SheetEdges:
     """Classify the section edges of the surface sheets ``surface`` ((E,)
     bool) of ``texture`` (its :class:`~aniso3d.rendering.volume.EntrySheets`
     ``sheets``) on their voxels' faces, and make the halos of the open and
-    creased ones (see the module docstring). Vectorised over (sheet, face)
-    pairs and their neighbouring voxels' entries, in chunks."""
+    creased ones (see the module docstring). A crease partner's angle is the
+    direction to its centroid, or with ``plane_angle`` its plane's (the
+    splats' clip planes, :data:`PHI_PLANE_MIN`). Vectorised over (sheet,
+    face) pairs and their neighbouring voxels' entries, in chunks."""
     E = texture.n_entries
     face = np.full((E, MAX_EDGES), -1, dtype=np.int8)
     kind = np.zeros((E, MAX_EDGES), dtype=np.int8)
@@ -290,17 +295,17 @@ def sheet_edges(texture, sheets, surface: np.ndarray) -> SheetEdges:
         t = np.cross(n1, u1)
         v = centroid[other] + delta - pm[q]
         v -= np.einsum("ek,ek->e", v, t)[:, None] * t
-        # The half-plane's direction is its plane's, across the edge (the
-        # line where the partner's plane cuts the plane normal to the edge),
-        # turned towards its centroid: the partner's plane passes up to
-        # EDGE_NEAR from the edge, and the direction to its centroid would
-        # tilt by as much (a wall 0.2 voxel inside its plate's voxel face
-        # stood at 63 degrees, not 90, and hid the plate's splats before it
-        # from eyes between the two). Where the partner's plane is nearly
-        # normal to the edge its centroid's direction stays.
+        # With plane_angle, the half-plane's direction is its plane's, across
+        # the edge (the line where the partner's plane cuts the plane normal
+        # to the edge), turned towards its centroid: the partner's plane
+        # passes up to EDGE_NEAR from the edge, and the direction to its
+        # centroid would tilt by as much (a wall 0.2 voxel inside its plate's
+        # voxel face stood at 63 degrees, not 90, and hid the plate's
+        # splats before it from eyes between the two). Where the partner's
+        # plane is nearly normal to the edge its centroid's direction stays.
         along = np.cross(t, nh[other])
         size = np.linalg.norm(along, axis=1)
-        plane = size >= PHI_PLANE_MIN
+        plane = (size >= PHI_PLANE_MIN) & plane_angle
         along = along / np.where(plane, size, 1.0)[:, None]
         along *= np.where(np.einsum("ek,ek->e", along, v) < 0.0, -1.0, 1.0)[:, None]
         v = np.where(plane[:, None], along, v)

@@ -92,7 +92,7 @@ def _entry_clips(texture: AnisoTexture, kinds: tuple[int, ...], sheets: EntryShe
     out = np.zeros((E, MAX_EDGES, 5))
     if E == 0:
         return out
-    edges = sheet_edges(texture, sheets, sheets.share >= RUN_SHARE)
+    edges = sheet_edges(texture, sheets, sheets.share >= RUN_SHARE, plane_angle=True)
     cut = (edges.face >= 0) & np.isin(edges.kind, kinds)
     row, k = np.nonzero(cut)
     face = edges.face[row, k].astype(np.int64)
