@@ -97,6 +97,15 @@ def draw_alpha(r, cloud: PointCloud | LodPoints, cam: Camera, **options) -> tupl
     return img[..., 3].copy(), view
 
 
+def assert_alpha_matches_twin(r, cloud: PointCloud, cam: Camera) -> tuple[np.ndarray, FrameView]:
+    """The GPU's alpha of ``cloud`` (quality "high", every splat sub-pixel),
+    pixel by pixel, within 2e-4 of the twin's; returns it and its view."""
+    img_alpha, view = draw_alpha(r, cloud, cam)
+    _, alpha = composite_np(subpixel_fragments_np(cloud, view, SplatOptions(quality="high")), view.lighting.background)
+    assert np.abs(img_alpha - alpha).max() < 2e-4, np.abs(img_alpha - alpha).max()
+    return img_alpha, view
+
+
 def hit_points(view: FrameView, z: float) -> np.ndarray:
     """(H, W, 3) where each pixel centre's ray meets the plane at depth z
     (row 0 at the top)."""
@@ -386,10 +395,7 @@ def test_gpu_matches_the_twin_with_cut_splats(r):
         clips[on, k, 3] = sign[on] * pos[on, axis] + rng.uniform(0.05, 0.6, on.sum()) * px
     cloud = PointCloud(pos, np.tile([0.0, 0.0, 1.0], (n, 1)), np.full(n, (0.7 * px) ** 2),
                        rng.uniform(0.1, 0.9, (n, 3)), np.zeros(n), np.full(n, 8.0), clips=clips)  # fmt: skip
-    img_alpha, view = draw_alpha(r, cloud, cam)
-    frags = subpixel_fragments_np(cloud, view, SplatOptions(quality="high"))
-    rgb, alpha = composite_np(frags, view.lighting.background)
-    assert np.abs(img_alpha - alpha).max() < 2e-4, np.abs(img_alpha - alpha).max()
+    assert_alpha_matches_twin(r, cloud, cam)
 
 
 def test_gpu_matches_the_twin_on_which_splats_their_partners_hide(r):
@@ -427,10 +433,7 @@ def test_gpu_matches_the_twin_on_which_splats_their_partners_hide(r):
     u = -(m - m[:, 2:3] * np.array([0.0, 0.0, 1.0]))
     n2 = np.sin(clips[:, 0, 4])[:, None] * u - np.cos(clips[:, 0, 4])[:, None] * np.array([0.0, 0.0, 1.0])
     assert np.all(np.einsum("nc,nc->n", n2, eye - q[:, 0])[as_two_sided] < 0.0)
-    img_alpha, view = draw_alpha(r, cloud, cam)
-    frags = subpixel_fragments_np(cloud, view, SplatOptions(quality="high"))
-    rgb, alpha = composite_np(frags, view.lighting.background)
-    assert np.abs(img_alpha - alpha).max() < 2e-4, np.abs(img_alpha - alpha).max()
+    assert_alpha_matches_twin(r, cloud, cam)
 
 
 def test_each_point_reads_its_own_clip_planes(r):
@@ -455,10 +458,7 @@ def test_each_point_reads_its_own_clip_planes(r):
     clips[cut, 0, 3] = sign[cut] * pos[cut, axis[cut]] + rng.uniform(0.05, 0.5, cut.sum()) * px
     cloud = PointCloud(pos, np.tile([0.0, 0.0, 1.0], (n, 1)), np.full(n, (1.0 * px) ** 2),
                        rng.uniform(0.1, 0.9, (n, 3)), np.zeros(n), np.full(n, 8.0), clips=clips)  # fmt: skip
-    img_alpha, view = draw_alpha(r, cloud, cam)
-    frags = subpixel_fragments_np(cloud, view, SplatOptions(quality="high"))
-    _, alpha = composite_np(frags, view.lighting.background)
-    assert np.abs(img_alpha - alpha).max() < 2e-4, np.abs(img_alpha - alpha).max()
+    img_alpha, view = assert_alpha_matches_twin(r, cloud, cam)
     # Each point's planes moved to the next point with planes: the twin differs.
     shifted = clips.copy()
     idx = np.flatnonzero(cut)
