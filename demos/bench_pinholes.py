@@ -3,7 +3,7 @@ pinholes, each against itself off: ``--rule angle`` (default), a crease
 partner's angle about its edge taken from its plane, not the direction to
 its centroid, for the splats' clip planes (render/sheet_edges.py
 ``PHI_PLANE_MIN``; the volume keeps the centroid's, its crease ramps lost
-up to 0.13 dB with the plane's); ``--rule sided``, a one-sided point's
+up to 0.13 dB with the plane's: docs/splat_aa.md, the block at 8814f3f); ``--rule sided``, a one-sided point's
 splat is never dropped behind its crease partner (splat/params.py
 ``AA_PARTNER_HIDES_SIDED``); ``--rule slope``, the whole-surface test counts
 a neighbour within the closure's reach plus this pixel's depth change

@@ -13,11 +13,11 @@
 //   the nearest surface is whole (a = 1) where the mean of min(1, sum) over
 //     the pixel and its four neighbours reaches CLOSE_MEAN (CLOSE_MEAN_SIDED
 //     where the pixel holds a one-sided splat, u_visible's blue 0), a neighbour
-//     counting when its nearest surface starts less than CLOSE_REACH u_span
-//     slices from this one's, plus, where the pixel holds a one-sided splat
-//     (CLOSE_SLOPE), the slices its surface's depth changes across a pixel
-//     (u_visible's least reach past its start: a closed surface at a grazing
-//     angle) (0 otherwise, and off the image), and the
+//     counting (0 otherwise, and off the image) when its nearest surface
+//     starts less than CLOSE_REACH u_span slices from this one's, plus,
+//     where the pixel holds a one-sided splat (CLOSE_SLOPE), the slices its
+//     surface's depth changes across a pixel (u_visible's least reach past
+//     its start: a closed surface at a grazing angle), and the
 //     pixel's own sum reaches CLOSE_OWN (a speck is not its surface): sub-pixel
 //     footprints (boxes at the splats' centres) do not tile a sheet exactly,
 //     so its sums scatter about 1 where it is whole, and what lies behind

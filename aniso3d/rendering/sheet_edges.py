@@ -64,8 +64,8 @@ MAX_EDGES = 2
 #: the plane normal to the edge at least this steeply (the sine of the angle
 #: between its normal and the edge), else its centroid's direction. The
 #: volume keeps the centroid's: its crease ramps lost up to 0.13 dB with the
-#: plane's (the lattice close up at 256^3; demos/bench_pinholes.py at
-#: 690b96f, docs/splat_aa.md "Pinholes in closed surfaces").
+#: plane's (the lattice close up at 256^3; docs/splat_aa.md "Pinholes in
+#: closed surfaces", the block at 8814f3f).
 PHI_PLANE_MIN = 0.5
 #: Edge kinds.
 OPEN, CREASE = 0, 1
