@@ -46,7 +46,16 @@ import numpy as np
 from aniso3d import metrics
 from aniso3d.bench.cameras import CameraSpec, crop_box, pixels_per_unit
 from aniso3d.bench.plan import Case, splat_case, volume_case
-from aniso3d.bench.run import classify_failure, code_version, cpu_model, loadavg, measure, score, truth_ssaa
+from aniso3d.bench.run import (
+    CODE_PATHS,
+    classify_failure,
+    code_version,
+    cpu_model,
+    loadavg,
+    measure,
+    score,
+    truth_ssaa,
+)
 from aniso3d.bench.settings import BASELINE
 from aniso3d.build import scenes
 from aniso3d.build.bounds import surface_sample
@@ -515,7 +524,7 @@ def run_corpus(
         n_scenes = len(pairs)
     t_start = time.perf_counter()
     load_start = loadavg()
-    version = code_version()  # the code that measures, before anything can change it
+    version = code_version(CODE_PATHS)  # the code that measures, before anything can change it
     # Texture, two truths, two cameras of renderers, the turntable, the texture
     # and renderers at "auto", done.
     auto = 1 + len(AUTO_RENDERERS) if settings.auto_close else 0

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aniso3d.bench.run import code_version
+from aniso3d.bench.run import CODE_PATHS, code_version
 from aniso3d.build.scenes import forest
 from aniso3d.errors import InputError, ResourceError
 from aniso3d.files import atomic_write
@@ -203,7 +203,7 @@ def write_report(rows, errors, load, args: ForestSettings, out: Path, command: s
 
 
 def _code() -> str:
-    code = code_version()
+    code = code_version(CODE_PATHS)
     if not code["commit"]:
         return "an unknown commit"
     return f"commit {code['commit'][:10]}" + (" with uncommitted changes" if code["dirty"] else "")

@@ -627,10 +627,10 @@ def run_peers(settings: PeerSettings, progress: Callable[[float, str], None] | N
     from aniso3d.rendering.renderer import Renderer
 
     say = progress or (lambda f, s: None)
-    from aniso3d.bench.run import code_version
+    from aniso3d.bench.run import CODE_PATHS, code_version
 
     meta: dict = {"load_start": _loadavg(), "cpus": os.cpu_count(), "started": time.strftime("%Y-%m-%d %H:%M"),
-                  "code": code_version()}  # fmt: skip
+                  "code": code_version(CODE_PATHS)}  # fmt: skip
     t_start = time.perf_counter()
     w, h = settings.size
     with tempfile.TemporaryDirectory(prefix="aniso3d-peers.") as tmp:

@@ -100,6 +100,11 @@ def loadavg() -> tuple[float, float, float] | None:
     return float(one), float(five), float(fifteen)
 
 
+#: What the code that measures is: a change elsewhere (the docs a bench run
+#: writes beside another) does not make a run's code "uncommitted".
+CODE_PATHS = ("aniso3d", "shaders")
+
+
 def code_version(paths: tuple[str, ...] = ()) -> dict:
     """Which code measured: the git commit of the package's checkout (None when
     it is not one) and whether tracked files differed from it (only those
@@ -147,7 +152,7 @@ def run_scenes(names, size: int, run_scene: Callable) -> ScenesRun:
     commit is the checkout's when the run starts, marked when the code (not
     the docs being written) differs from it."""
     started, load0 = time.time(), os.getloadavg()
-    version = code_version(("aniso3d", "shaders", "demos"))
+    version = code_version((*CODE_PATHS, "demos"))
     commit = (version["commit"] or "unknown")[:7]
     commit += " (with uncommitted changes to the code)" if version["dirty"] else ""
     rows: list = []
@@ -456,7 +461,7 @@ def run_bench(
         with_flip = metrics.flip_available()
     t_start = time.perf_counter()
     load_start = loadavg()
-    version = code_version()
+    version = code_version(CODE_PATHS)
     sweep = _Sweep(mesh, settings, progress, with_flip)
     gl = GLContext(backend)
     try:
