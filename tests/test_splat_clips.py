@@ -97,6 +97,21 @@ def draw_alpha(r, cloud: PointCloud | LodPoints, cam: Camera, **options) -> tupl
     return img[..., 3].copy(), view
 
 
+def flat_grid(g: np.ndarray) -> np.ndarray:
+    """(N, 3) the points of the square grid with coordinates ``g`` along x and
+    y in the plane z = 0, row by row."""
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    return np.c_[x, y, np.zeros(x.size)]
+
+
+def facing_cloud(pos: np.ndarray, side: float, rng, **fields) -> PointCloud:
+    """Points at ``pos`` facing +z, each of area ``side``^2, their colours drawn
+    from ``rng``; ``fields``: the cloud's other fields (clips, one_sided)."""
+    n = len(pos)
+    return PointCloud(pos, np.tile([0.0, 0.0, 1.0], (n, 1)), np.full(n, side**2), rng.uniform(0.1, 0.9, (n, 3)),
+                      np.zeros(n), np.full(n, 8.0), **fields)  # fmt: skip
+
+
 def assert_alpha_matches_twin(r, cloud: PointCloud, cam: Camera) -> tuple[np.ndarray, FrameView]:
     """The GPU's alpha of ``cloud`` (quality "high", every splat sub-pixel),
     pixel by pixel, within 2e-4 of the twin's; returns it and its view."""
@@ -387,18 +402,15 @@ def test_gpu_matches_the_twin_with_cut_splats(r):
     cam = Camera((0.0, 0.0, 3.0), (0.0, 0.0, 0.0), fov=40.0)
     px = 3.0 * 2 * math.tan(math.radians(20.0)) / SIZE[1]
     rng = np.random.default_rng(7)
-    g = (np.arange(-20, 20, 0.7) + 0.35) * px
-    x, y = (a.ravel() for a in np.meshgrid(g, g))
-    n = x.size
-    pos = np.c_[x, y, np.zeros(n)]
+    pos = flat_grid((np.arange(-20, 20, 0.7) + 0.35) * px)
+    n = len(pos)
     clips = np.zeros((n, 2, 5))
     for k, axis in enumerate((0, 1)):
         on = rng.random(n) < 0.5
         sign = np.where(rng.random(n) < 0.5, 1.0, -1.0)
         clips[on, k, axis] = sign[on]
         clips[on, k, 3] = sign[on] * pos[on, axis] + rng.uniform(0.05, 0.6, on.sum()) * px
-    cloud = PointCloud(pos, np.tile([0.0, 0.0, 1.0], (n, 1)), np.full(n, (0.7 * px) ** 2),
-                       rng.uniform(0.1, 0.9, (n, 3)), np.zeros(n), np.full(n, 8.0), clips=clips)  # fmt: skip
+    cloud = facing_cloud(pos, 0.7 * px, rng, clips=clips)
     assert_alpha_matches_twin(r, cloud, cam)
 
 
@@ -411,10 +423,8 @@ def test_gpu_matches_the_twin_on_which_splats_their_partners_hide(r):
     cam = Camera((1.2, 0.4, 2.6), (0.0, 0.0, 0.0), fov=40.0)
     px = 2.9 * 2 * math.tan(math.radians(20.0)) / SIZE[1]
     rng = np.random.default_rng(11)
-    g = (np.arange(-16, 16, 0.8) + 0.4) * px
-    x, y = (a.ravel() for a in np.meshgrid(g, g))
-    n = x.size
-    pos = np.c_[x, y, np.zeros(n)]
+    pos = flat_grid((np.arange(-16, 16, 0.8) + 0.4) * px)
+    n = len(pos)
     axis = rng.integers(0, 2, n)
     sign = np.where(rng.random(n) < 0.5, 1.0, -1.0)
     clips = np.zeros((n, 2, 5))
@@ -422,9 +432,7 @@ def test_gpu_matches_the_twin_on_which_splats_their_partners_hide(r):
     clips[:, 0, 3] = sign * pos[np.arange(n), axis] + 0.3 * px
     clips[:, 0, 4] = rng.uniform(-2.8, 2.8, n)
     sided = rng.random(n) < 0.5
-    cloud = PointCloud(pos, np.tile([0.0, 0.0, 1.0], (n, 1)), np.full(n, (0.7 * px) ** 2),
-                       rng.uniform(0.1, 0.9, (n, 3)), np.zeros(n), np.full(n, 8.0), one_sided=sided,
-                       clips=clips)  # fmt: skip
+    cloud = facing_cloud(pos, 0.7 * px, rng, one_sided=sided, clips=clips)
     eye = np.asarray(cam.position, float)
     hidden = clip_geometry_np(pos, cloud.normals, clips, eye, sided)[3]
     as_two_sided = clip_geometry_np(pos, cloud.normals, clips, eye)[3]
@@ -449,19 +457,16 @@ def test_each_point_reads_its_own_clip_planes(r):
     cam = Camera((0.0, 0.0, 3.0), (0.0, 0.0, 0.0), fov=40.0)
     px = 3.0 * 2 * math.tan(math.radians(20.0)) / SIZE[1]
     rng = np.random.default_rng(11)
-    g = (np.arange(-18, 18) * 2.5 + 0.3) * px  # apart: each splat's alpha is its own
-    x, y = (a.ravel() for a in np.meshgrid(g, g))
-    n = x.size  # 1296 points
-    order = rng.permutation(n)
-    pos = np.c_[x[order], y[order], np.zeros(n)]
+    grid = flat_grid((np.arange(-18, 18) * 2.5 + 0.3) * px)  # apart: each splat's alpha is its own
+    n = len(grid)  # 1296 points
+    pos = grid[rng.permutation(n)]
     cut = rng.random(n) < 0.15
     clips = np.zeros((n, 2, 5))
     axis = rng.integers(0, 2, n)
     sign = np.where(rng.random(n) < 0.5, 1.0, -1.0)
     clips[cut, 0, axis[cut]] = sign[cut]
     clips[cut, 0, 3] = sign[cut] * pos[cut, axis[cut]] + rng.uniform(0.05, 0.5, cut.sum()) * px
-    cloud = PointCloud(pos, np.tile([0.0, 0.0, 1.0], (n, 1)), np.full(n, (1.0 * px) ** 2),
-                       rng.uniform(0.1, 0.9, (n, 3)), np.zeros(n), np.full(n, 8.0), clips=clips)  # fmt: skip
+    cloud = facing_cloud(pos, 1.0 * px, rng, clips=clips)
     img_alpha, view = assert_alpha_matches_twin(r, cloud, cam)
     # Each point's planes moved to the next point with planes: the twin differs.
     shifted = clips.copy()
