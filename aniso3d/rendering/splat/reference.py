@@ -437,6 +437,18 @@ def closed_np(
     return (own < 1.0) & (own >= float(params.AA_CLOSE_OWN)) & (total >= 5.0 * min_mean)
 
 
+def least_reach_slice(frags: Fragments, keep: np.ndarray) -> np.ndarray:
+    """(H * W,) per pixel the slice of the least depth plus reach of its
+    kept fragments (``keep``, (F,) bool; inf where none): what the
+    visibility pass's green channel holds, in slices (splat_surfaces.frag,
+    splat_aa_resolve.frag). ``frags.reach`` must be set."""
+    w, h = frags.size
+    least = np.full(w * h, np.inf)
+    np.minimum.at(least, frags.pixel[keep], np.asarray(frags.reach, np.float64)[keep])
+    with np.errstate(invalid="ignore"):
+        return np.floor((least - frags.slicing[0]) * frags.slicing[1])
+
+
 def fragment_surfaces(frags: Fragments) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The surfaces of each pixel of ``frags`` (rule steps 1 to 3): (keep,
     slice, starts, count), ``keep`` (F,) bool the fragments kept (coverage at
@@ -450,10 +462,7 @@ def fragment_surfaces(frags: Fragments) -> tuple[np.ndarray, np.ndarray, np.ndar
     s = np.clip(np.floor((frags.depth[keep] - lo) * scale), 0, AA_SLICES - 1).astype(np.int64)
     first_end = None
     if frags.reach is not None:
-        least = np.full(w * h, np.inf)
-        np.minimum.at(least, pixel, np.asarray(frags.reach, np.float64)[keep])
-        with np.errstate(invalid="ignore"):
-            first_end = np.floor((least - lo) * scale) + span
+        first_end = least_reach_slice(frags, keep) + span
     # Pixels without a closed surface seen from outside chain their reach.
     counted = np.ones(len(pixel)) if frags.counts is None else np.asarray(frags.counts, np.float64)[keep]
     chained = np.bincount(pixel, counted > 1, w * h) == 0
@@ -504,10 +513,8 @@ def composite_np(
         sided = np.bincount(pixel, np.asarray(frags.counts, np.float64)[keep] > 1, w * h).reshape(h, w) > 0
         if frags.reach is not None and params.AA_CLOSE_SLOPE:
             # The nearest surface's depth change across a pixel: its least reach's slice past its start.
-            least = np.full(w * h, np.inf)
-            np.minimum.at(least, pixel, np.asarray(frags.reach, np.float64)[keep])
             with np.errstate(invalid="ignore"):
-                rise = np.floor((least - frags.slicing[0]) * frags.slicing[1]) - starts[:, 0]
+                rise = least_reach_slice(frags, keep) - starts[:, 0]
             slope = np.where(sided.ravel() & np.isfinite(rise), np.maximum(rise, 0.0), 0.0).reshape(h, w)
     whole = closed_np(total[:, 0].reshape(h, w), starts[:, 0].reshape(h, w), span, sided, slope).ravel()
     whole &= layers > 1
