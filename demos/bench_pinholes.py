@@ -84,11 +84,9 @@ def pinholes(truth_a: np.ndarray, img_a: np.ndarray, crop) -> int:
     x0, y0, x1, y1 = crop
     t = truth_a[y0:y1, x0:x1]
     whole = t == 255
-    inner = whole.copy()
+    inner = np.zeros_like(whole)  # the border's pixels lack neighbours: never counted
     inner[1:-1, 1:-1] = np.logical_and.reduce([whole[1 + dy : t.shape[0] - 1 + dy, 1 + dx : t.shape[1] - 1 + dx]
                                                for dy in (-1, 0, 1) for dx in (-1, 0, 1)])  # fmt: skip
-    inner[[0, -1], :] = False
-    inner[:, [0, -1]] = False
     return int((img_a[y0:y1, x0:x1][inner] < PINHOLE_ALPHA * 255).sum())
 
 
